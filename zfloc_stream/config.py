@@ -1,0 +1,207 @@
+"""Typed settings: one pydantic model per stage, composed into Settings.
+
+Every number the algorithm uses has a name here; configs/default.yaml is the dump of
+these defaults (a test keeps the two identical). Unknown keys are errors, so a typo in a
+config file fails loudly instead of being ignored.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from .errors import ConfigError
+
+SolverName = Literal["3L", "2L", "2C", "LC"]
+ScaleMode = Literal["free", "prior", "fixed"]
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LineSettings(Section):
+    """Seeded region growing (paper 3.1)."""
+
+    neighbourhood_radius: float = 0.25  # m, PCA neighbourhood of a seed, in units of the point spacing scale
+    inlier_distance: float = 0.05  # m, orthogonal distance to grow a line
+    gap: float = 0.3  # m, largest gap along a line before it is split
+    min_points: int = 8
+    min_length: float = 0.5  # m
+    dedup_angle_deg: float = 5.0  # near-duplicate suppression
+    dedup_offset: float = 0.15  # m
+
+
+class CircleSettings(Section):
+    """HDBSCAN clustering + 3-point RANSAC + angular checks (paper 3.1)."""
+
+    min_cluster_size: int = 10
+    ransac_iterations: int = 100
+    inlier_distance: float = 0.03  # m
+    min_radius: float = 0.1  # m
+    max_radius: float = 1.0  # m
+    min_inlier_ratio: float = 0.8
+    min_coverage_deg: float = 120.0  # 2*pi minus the largest angular gap
+    max_gap_deg: float = 30.0  # angular continuity: consecutive gaps below this...
+    min_span_deg: float = 90.0  # ...over a contiguous span at least this long
+
+
+class PrimitiveSettings(Section):
+    lines: LineSettings = LineSettings()
+    circles: CircleSettings = CircleSettings()
+
+
+class FloorplanSettings(Section):
+    neighbour_distance: float = 6.0  # m, lines closer than this are spatial neighbours (3L pruning)
+    wall_sample_spacing: float = 0.05  # m, floorplan wall pixels used by Cv are subsampled to this
+
+
+class SolverSettings(Section):
+    pool: list[SolverName] = ["3L", "2L", "2C", "LC"]
+    normal_consistency: float = 0.95  # tau_p, cosine threshold for 3L pruning
+    scale_prior_ggd_shape: float = 4.0  # 2L: generalised Gaussian noise on the metric scale
+    scale_prior_prob: float = 0.8  # P(|eps| <= scale_prior_window * s) = this
+    scale_prior_window: float = 0.1
+    min_scale: float = 0.5  # models outside [min_scale, max_scale] are discarded
+    max_scale: float = 2.0
+
+
+class ScoringSettings(Section):
+    tau_c: float = 0.1  # m, consistency threshold (paper)
+    tau_v: float = 0.2  # m, violation threshold (paper)
+    sparse_spacing: float = 0.25  # m, spacing of BEV line samples for the coarse pass
+    top_k: int = 50  # hypotheses re-ranked with the full score
+    distinct_translation: float = 0.5  # m, hypotheses closer than this (and distinct_angle) are one
+    distinct_angle_deg: float = 10.0
+
+
+class RefineSettings(Section):
+    huber_delta: float = 0.1  # m
+    max_evaluations: int = 50
+    top_n: int = 5  # hypotheses refined
+
+
+class RansacSettings(Section):
+    iterations: int = 500
+    tracking_iterations: int = 150  # fewer fresh samples while one mode is tracked
+    max_hypotheses: int = 10  # ranked distinct hypotheses returned
+
+
+class EstimatorSettings(Section):
+    scale_mode: ScaleMode = "free"
+    solvers: SolverSettings = SolverSettings()
+    scoring: ScoringSettings = ScoringSettings()
+    refine: RefineSettings = RefineSettings()
+    ransac: RansacSettings = RansacSettings()
+
+
+class GravitySettings(Section):
+    trust_odometry: bool = False  # VIO already gravity-aligned: take -z of odom as gravity
+
+
+class WallMaskSettings(Section):
+    enabled: bool = True
+    tau_d: float = 0.3  # m (paper's tau_d)
+
+
+class FrontendSettings(Section):
+    gravity: GravitySettings = GravitySettings()
+    wall_mask: WallMaskSettings = WallMaskSettings()
+
+
+class BevSettings(Section):
+    resolution: float = 0.05  # m per cell
+    window_radius: float = 15.0  # m, cells farther than this from the sensor are dropped
+
+
+class TrackingSettings(Section):
+    pass
+
+
+class LocalizerSettings(Section):
+    every_k_frames: int = 5
+
+
+class Settings(Section):
+    seed: int = 0
+    floorplan: FloorplanSettings = FloorplanSettings()
+    primitives: PrimitiveSettings = PrimitiveSettings()
+    estimator: EstimatorSettings = EstimatorSettings()
+    frontend: FrontendSettings = FrontendSettings()
+    bev: BevSettings = BevSettings()
+    tracking: TrackingSettings = TrackingSettings()
+    localizer: LocalizerSettings = LocalizerSettings()
+
+
+def _merge(base: dict, update: dict) -> dict:
+    out = dict(base)
+    for key, value in update.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _dotted_to_nested(key: str, value) -> dict:
+    out: dict = value
+    for part in reversed(key.split(".")):
+        out = {part: out}
+    return out
+
+
+def _format_validation_error(err: ValidationError, source: str) -> str:
+    first = err.errors()[0]
+    loc = ".".join(str(p) for p in first["loc"]) or "<root>"
+    if first["type"] == "extra_forbidden":
+        return f"{source}: unknown setting '{loc}'"
+    return f"{source}: setting '{loc}': {first['msg']}"
+
+
+def settings_from_dict(data: dict, source: str = "settings") -> Settings:
+    try:
+        return Settings.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(_format_validation_error(err, source)) from None
+
+
+def load_settings(path: str | Path | None = None, overrides: list[str] | dict | None = None) -> Settings:
+    """Defaults, updated by a YAML file, updated by overrides.
+
+    overrides: either a nested dict or 'dotted.key=value' strings (values parsed as YAML).
+    """
+    data: dict = Settings().model_dump()
+    source = "defaults"
+    if path is not None:
+        path = Path(path)
+        source = str(path)
+        try:
+            loaded = yaml.safe_load(path.read_text()) or {}
+        except FileNotFoundError:
+            raise ConfigError(f"config file not found: {path}") from None
+        except (OSError, yaml.YAMLError) as err:
+            raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"{path}: top level must be a mapping")
+        data = _merge(data, loaded)
+    if isinstance(overrides, dict):
+        data = _merge(data, overrides)
+    elif overrides:
+        for item in overrides:
+            if "=" not in item:
+                raise ConfigError(f"override '{item}' must look like dotted.key=value")
+            key, raw = item.split("=", 1)
+            try:
+                value = yaml.safe_load(raw)
+            except yaml.YAMLError:
+                raise ConfigError(f"override '{item}': value is not valid YAML") from None
+            data = _merge(data, _dotted_to_nested(key.strip(), value))
+        source = f"{source} + overrides"
+    return settings_from_dict(data, source)
+
+
+def dump_settings(settings: Settings) -> str:
+    return yaml.safe_dump(settings.model_dump(), sort_keys=False)

@@ -1,0 +1,29 @@
+"""One exception family for every user-facing fault.
+
+The CLI catches ZflocError, prints its message on one line and exits 2; anything else
+escaping is a bug. Messages name the offending thing (file, key, frame, array).
+"""
+
+
+class ZflocError(Exception):
+    """Base of every error the package raises on purpose."""
+
+
+class ConfigError(ZflocError):
+    """A settings file or override is malformed, has an unknown key or a bad value."""
+
+
+class FloorplanError(ZflocError):
+    """A floorplan cannot be read or is unusable (missing file, bad YAML, no walls)."""
+
+
+class InputError(ZflocError):
+    """Input data is invalid: NaN points, empty BEV, bad frame shapes, unreadable source."""
+
+
+class FrameError(InputError):
+    """One frame is invalid; inside a stream it is skipped with a logged reason."""
+
+
+class SessionLogError(InputError):
+    """An MCAP session file is missing, corrupt, truncated or lacks required topics."""

@@ -1,0 +1,127 @@
+"""Typed, validated input records: one per time step.
+
+A frame is validated on construction, so everything downstream can trust shapes, dtypes
+and finiteness. Invalid frames raise FrameError naming what is wrong; the streaming
+localizer catches it, logs the reason and skips the frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import FrameError
+
+# Label codes (DESIGN.md, /camera/labels mono8)
+UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
+
+
+def _check_pose(T, name: str) -> np.ndarray:
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4):
+        raise FrameError(f"{name} must be a 4x4 matrix, got shape {T.shape}")
+    if not np.isfinite(T).all():
+        raise FrameError(f"{name} contains NaN or inf")
+    R = T[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
+        raise FrameError(f"{name} rotation is not orthonormal (R^T R != I or det < 0)")
+    if np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-9:
+        raise FrameError(f"{name} last row must be [0, 0, 0, 1]")
+    return T
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """Depth + per-pixel labels from a pinhole camera (OpenCV axes: x right, y down, z fwd).
+
+    depth: HxW float32, metres along the optical axis; 0 or NaN = no reading.
+    labels: HxW uint8 with the codes above, or None when a geometric labeller must label.
+    K: 3x3 intrinsics. T_odom_cam: 4x4 camera-to-odometry pose (relative poses only).
+    ground_truth: optional (x, y, theta) of the camera in the floorplan frame; never seen
+    by the localizer, carried for logging and scoring.
+    """
+
+    depth: np.ndarray
+    labels: np.ndarray | None
+    K: np.ndarray
+    T_odom_cam: np.ndarray
+    timestamp: float
+    ground_truth: np.ndarray | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        d = np.asarray(self.depth)
+        if d.ndim != 2 or d.size == 0:
+            raise FrameError(f"depth must be a non-empty HxW array, got shape {d.shape}")
+        if d.dtype != np.float32:
+            d = d.astype(np.float32)
+        if np.isinf(d).any():
+            raise FrameError("depth contains inf")
+        valid = np.isfinite(d) & (d != 0)
+        if (d[valid] < 0).any():
+            raise FrameError("depth contains negative values")
+        if not valid.any():
+            raise FrameError("depth has no valid reading (all zero or NaN)")
+        object.__setattr__(self, "depth", d)
+        if self.labels is not None:
+            lab = np.asarray(self.labels)
+            if lab.shape != d.shape:
+                raise FrameError(f"labels shape {lab.shape} does not match depth shape {d.shape}")
+            if lab.dtype != np.uint8:
+                raise FrameError(f"labels must be uint8, got {lab.dtype}")
+        K = np.asarray(self.K, dtype=float)
+        if K.shape != (3, 3) or not np.isfinite(K).all():
+            raise FrameError("K must be a finite 3x3 matrix")
+        if abs(np.linalg.det(K)) < 1e-12 or K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise FrameError("K is singular (focal lengths must be positive)")
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "T_odom_cam", _check_pose(self.T_odom_cam, "T_odom_cam"))
+        if not np.isfinite(self.timestamp):
+            raise FrameError("timestamp is not finite")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.depth.shape
+
+
+@dataclass(frozen=True)
+class LaserFrame:
+    """A planar range scan. Sensor axes: x forward, y left, z up; beam i points at
+    angle_min + i * angle_increment (counter-clockwise from x). Readings outside
+    [range_min, range_max] or non-finite are no-returns. T_odom_sensor: 4x4, the scan
+    plane is assumed horizontal (odometry z up)."""
+
+    ranges: np.ndarray
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    T_odom_sensor: np.ndarray
+    timestamp: float
+    ground_truth: np.ndarray | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        r = np.asarray(self.ranges, dtype=float)
+        if r.ndim != 1 or r.size == 0:
+            raise FrameError(f"ranges must be a non-empty 1D array, got shape {r.shape}")
+        object.__setattr__(self, "ranges", r)
+        for name in ("angle_min", "angle_increment", "range_min", "range_max", "timestamp"):
+            if not np.isfinite(getattr(self, name)):
+                raise FrameError(f"{name} is not finite")
+        if self.angle_increment == 0:
+            raise FrameError("angle_increment must be non-zero")
+        if not 0 <= self.range_min < self.range_max:
+            raise FrameError("need 0 <= range_min < range_max")
+        object.__setattr__(self, "T_odom_sensor", _check_pose(self.T_odom_sensor, "T_odom_sensor"))
+
+    @property
+    def angles(self) -> np.ndarray:
+        return self.angle_min + self.angle_increment * np.arange(self.ranges.size)
+
+    @property
+    def valid(self) -> np.ndarray:
+        r = self.ranges
+        return np.isfinite(r) & (r >= self.range_min) & (r < self.range_max)
+
+
+Frame = CameraFrame | LaserFrame

@@ -1,0 +1,63 @@
+"""Primitive types shared by the floorplan, the BEV and the solvers.
+
+A line is kept in normal form n^T x + d = 0 (|n| = 1) with the extent of the points that
+support it; a circle by centre and radius. Sets are plain arrays so solvers can vectorise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LineSet:
+    normals: np.ndarray  # (N, 2) unit normals
+    offsets: np.ndarray  # (N,) signed offsets d
+    endpoints: np.ndarray  # (N, 2, 2) segment ends (extent of support)
+    support: np.ndarray | None = None  # (N,) number of supporting points
+
+    @classmethod
+    def empty(cls) -> LineSet:
+        return cls(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2, 2)), np.zeros(0, dtype=int))
+
+    @classmethod
+    def from_endpoints(cls, endpoints) -> LineSet:
+        e = np.asarray(endpoints, dtype=float).reshape(-1, 2, 2)
+        direction = e[:, 1] - e[:, 0]
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        normals = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+        offsets = -np.einsum("ij,ij->i", normals, e[:, 0])
+        return cls(normals, offsets, e)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.linalg.norm(self.endpoints[:, 1] - self.endpoints[:, 0], axis=1)
+
+    @property
+    def midpoints(self) -> np.ndarray:
+        return self.endpoints.mean(axis=1)
+
+    def subset(self, index) -> LineSet:
+        sup = None if self.support is None else self.support[index]
+        return LineSet(self.normals[index], self.offsets[index], self.endpoints[index], sup)
+
+
+@dataclass(frozen=True)
+class CircleSet:
+    centers: np.ndarray  # (M, 2)
+    radii: np.ndarray  # (M,)
+
+    @classmethod
+    def empty(cls) -> CircleSet:
+        return cls(np.zeros((0, 2)), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.radii)
+
+    def subset(self, index) -> CircleSet:
+        return CircleSet(self.centers[index], self.radii[index])
