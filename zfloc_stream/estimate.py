@@ -1,0 +1,45 @@
+"""What the localizer reports for every pushed frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from .sim2 import Sim2
+
+Status = Literal["initializing", "tracking", "ambiguous", "lost"]
+STATUSES: tuple[str, ...] = ("initializing", "tracking", "ambiguous", "lost")
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """One live mode: an odom-plane -> floorplan alignment and the pose it implies."""
+
+    alignment: Sim2
+    pose: np.ndarray  # (3,) x, y, theta of the sensor in the floorplan frame
+    weight: float  # normalised over modes
+    score: float  # latest C = Cc - Cv
+
+
+@dataclass(frozen=True)
+class Estimate:
+    frame: int
+    timestamp: float
+    status: Status
+    pose: np.ndarray | None  # (3,) best x, y, theta in the floorplan; None before any hypothesis
+    covariance: np.ndarray | None  # (3, 3) of pose
+    alignment: Sim2 | None  # best odom-plane -> floorplan alignment
+    score: float  # best mode's latest score (nan when none)
+    alternatives: tuple[Alternative, ...] = ()
+    timings: dict[str, float] = field(default_factory=dict)  # seconds per stage for this push
+    skipped: str | None = None  # reason when the frame was rejected and not fused
+
+    @property
+    def scale(self) -> float:
+        return self.alignment.s if self.alignment is not None else float("nan")
+
+    @property
+    def n_hypotheses(self) -> int:
+        return len(self.alternatives)
