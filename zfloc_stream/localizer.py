@@ -1,0 +1,115 @@
+"""The streaming localizer: one object an embedded loop feeds one frame at a time.
+
+    loc = Localizer(floorplan, settings)
+    for frame in frames:
+        est = loc.push(frame)
+
+Each push fuses the frame into the rolling BEV. Every k frames a round runs: primitives
+are extracted, the live modes are re-scored and refined first (warm start), fresh minimal
+samples are drawn (fewer while one mode is confidently tracked, a full global search while
+initializing or lost), and the tracker updates its modes. Between rounds the pose is the
+current best alignment applied to the frame's odometry-plane pose, so every frame has one.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .config import Settings
+from .errors import ZflocError
+from .estimate import Alternative, Estimate
+from .estimation import localize
+from .floorplan import Floorplan
+from .frames import CameraFrame, LaserFrame
+from .frontend.bev import RollingBEV
+from .rng import make_rng
+from .tracking import HypothesisTracker
+
+
+class Localizer:
+    def __init__(self, floorplan: Floorplan, settings: Settings | None = None):
+        self.settings = settings or Settings()
+        self.floorplan = floorplan
+        self.bev = RollingBEV(self.settings)
+        self.tracker = HypothesisTracker(self.settings.tracking)
+        self.frames_pushed = 0
+        self.frames_fused = 0
+        self.last_result = None  # LocalizationResult of the latest round, for logging
+
+    # ------------------------------------------------------------------------------
+    def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
+        index = self.frames_pushed
+        self.frames_pushed += 1
+        timings: dict[str, float] = {}
+        t0 = time.perf_counter()
+        try:
+            self.bev.add(frame)
+            plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
+        except ZflocError as err:  # one bad frame never kills the stream
+            return self._estimate(index, frame.timestamp, None, timings, skipped=str(err))
+        self.frames_fused += 1
+        timings["fusion"] = time.perf_counter() - t0
+
+        evidence = None
+        if self.frames_fused % self.settings.localizer.every_k_frames == 0:
+            evidence = self._round(index, plane_pose, timings)
+        return self._estimate(index, frame.timestamp, plane_pose, timings, evidence=evidence)
+
+    # ------------------------------------------------------------------------------
+    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> bool:
+        """Extract, estimate, track. Returns whether the BEV held enough evidence."""
+        cfg = self.settings
+        t0 = time.perf_counter()
+        try:
+            obs = self.bev.observation(make_rng(cfg.seed, "primitives", index))
+        except ZflocError:
+            obs = None
+        timings["primitives"] = time.perf_counter() - t0
+        if obs is None or not self._enough_evidence(obs):
+            return False
+        tracked = self.tracker.confidently_tracking
+        iterations = cfg.estimator.ransac.tracking_iterations if tracked else cfg.estimator.ransac.iterations
+        try:
+            result = localize(
+                self.floorplan,
+                obs,
+                cfg.estimator,
+                make_rng(cfg.seed, "ransac", index),
+                warm_start=self.tracker.warm_start(),
+                iterations=iterations,
+            )
+        except ZflocError:
+            return False
+        self.last_result = result
+        for key, value in result.timings.items():
+            timings[key] = value
+        t0 = time.perf_counter()
+        self.tracker.update(result.hypotheses, plane_pose[:2], index)
+        timings["tracking"] = time.perf_counter() - t0
+        return True
+
+    def _enough_evidence(self, obs) -> bool:
+        cfg = self.settings.localizer
+        return len(obs.wall_points) >= cfg.min_wall_points and len(obs.lines) + len(obs.circles) >= cfg.min_primitives
+
+    # ------------------------------------------------------------------------------
+    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, evidence=None) -> Estimate:
+        status = self.tracker.status
+        best = self.tracker.best
+        if best is None or plane_pose is None:
+            pose = cov = alignment = None
+            score = float("nan")
+        else:
+            alignment = best.alignment
+            pose = np.array(alignment.apply_pose(*plane_pose))
+            cov = self.tracker.pose_covariance(best, plane_pose)
+            score = float(best.score)
+        alternatives = ()
+        if plane_pose is not None:
+            alternatives = tuple(
+                Alternative(m.alignment, np.array(m.alignment.apply_pose(*plane_pose)), float(m.weight), float(m.score))
+                for m in self.tracker.modes
+            )
+        return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped)

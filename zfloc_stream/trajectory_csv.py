@@ -1,0 +1,63 @@
+"""trajectory.csv: one row per pushed frame (public contract, DESIGN.md).
+
+Rows are flushed as they are written so a crash loses at most the frame in flight.
+Columns: frame, timestamp, x, y, theta, scale, score, n_hypotheses, status. Before the
+first hypothesis x, y, theta, scale and score are empty.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from .estimate import Estimate
+
+COLUMNS = ("frame", "timestamp", "x", "y", "theta", "scale", "score", "n_hypotheses", "status")
+
+
+def _num(value: float) -> str:
+    return "" if value is None or not np.isfinite(value) else repr(float(value))
+
+
+def estimate_row(est: Estimate) -> list[str]:
+    x, y, theta = (None, None, None) if est.pose is None else est.pose
+    return [
+        str(est.frame),
+        repr(float(est.timestamp)),
+        _num(x),
+        _num(y),
+        _num(theta),
+        _num(est.scale),
+        _num(est.score),
+        str(est.n_hypotheses),
+        est.status,
+    ]
+
+
+class TrajectoryCsvWriter:
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._file = open(self.path, "w", newline="")
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(COLUMNS)
+        self._file.flush()
+
+    def write(self, est: Estimate) -> None:
+        self._writer.writerow(estimate_row(est))
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_trajectory_csv(path: str | Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
