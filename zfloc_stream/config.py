@@ -118,11 +118,45 @@ class BevSettings(Section):
 
 
 class TrackingSettings(Section):
-    pass
+    """Filter bank over the alignment, state anchored at the sensor (see tracking.py)."""
+
+    # random-walk drift per round: variance grows with frames elapsed and metres travelled
+    process_translation_std_per_frame: float = 0.01  # m per sqrt(frame), implied sensor position
+    process_angle_deg_per_frame: float = 0.1  # deg per sqrt(frame)
+    process_log_scale_per_frame: float = 0.001  # per sqrt(frame)
+    process_translation_std_per_m: float = 0.05  # m per sqrt(m travelled)
+    process_angle_deg_per_m: float = 1.0  # deg per sqrt(m travelled)
+    process_log_scale_per_m: float = 0.01  # per sqrt(m travelled)
+    # one refined RANSAC hypothesis, expressed at the sensor (also a new mode's covariance)
+    measurement_translation_std: float = 0.15  # m
+    measurement_angle_deg: float = 2.0
+    measurement_log_scale: float = 0.02
+    gate_chi2: float = 13.28  # Mahalanobis^2 gate, chi2(4 dof) at 99%
+    # weights = softmax(weight_gain * running score); running score = EMA of fresh scores
+    score_smoothing: float = 0.3  # EMA factor of a fresh score (or unobserved_score on a miss)
+    unobserved_score: float = 0.0  # score a mode gets in a round where nothing matches it
+    weight_gain: float = 15.0
+    # births, pruning, merging
+    birth_min_score: float = 0.3  # an unmatched hypothesis starts a mode only above this...
+    birth_ratio: float = 0.8  # ...and above this fraction of the round's best score
+    prune_weight: float = 0.001
+    max_modes: int = 8
+    merge_translation: float = 0.3  # m, implied sensor positions closer than this...
+    merge_angle_deg: float = 5.0  # ...and headings closer than this...
+    merge_log_scale: float = 0.05  # ...and log scales closer than this: one mode
+    # status
+    min_score: float = 0.3  # best running score below this: too little evidence
+    confirm_rounds: int = 2  # matches before a mode can be tracked / make things ambiguous
+    ambiguity_ratio: float = 0.5  # a second confirmed mode with weight >= this * best: ambiguous
+    lost_score_ratio: float = 0.5  # fresh score below this * running score is a collapse...
+    lost_rounds: int = 2  # ...and this many consecutive collapses of the tracked mode: lost
+    confident_rounds: int = 5  # rounds of tracking one mode before confidently_tracking
 
 
 class LocalizerSettings(Section):
-    every_k_frames: int = 5
+    every_k_frames: int = 5  # a RANSAC round every k fused frames
+    min_wall_points: int = 100  # BEV wall cells needed before the first round
+    min_primitives: int = 3  # lines + circles needed before the first round
 
 
 class Settings(Section):
@@ -168,13 +202,20 @@ def settings_from_dict(data: dict, source: str = "settings") -> Settings:
         raise ConfigError(_format_validation_error(err, source)) from None
 
 
-def load_settings(path: str | Path | None = None, overrides: list[str] | dict | None = None) -> Settings:
-    """Defaults, updated by a YAML file, updated by overrides.
+def load_settings(
+    path: str | Path | None = None,
+    overrides: list[str] | dict | None = None,
+    base_overrides: dict | None = None,
+) -> Settings:
+    """Defaults, updated by base_overrides (what a data source needs, e.g. fixed scale for
+    a laser), by a YAML file, then by overrides.
 
     overrides: either a nested dict or 'dotted.key=value' strings (values parsed as YAML).
     """
     data: dict = Settings().model_dump()
     source = "defaults"
+    if base_overrides:
+        data = _merge(data, base_overrides)
     if path is not None:
         path = Path(path)
         source = str(path)
