@@ -1,0 +1,299 @@
+"""Synthetic hypothesis streams through the filter bank (no other stage needed)."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from zfloc_stream.config import TrackingSettings
+from zfloc_stream.errors import InputError
+from zfloc_stream.rng import make_rng
+from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.tracking import HypothesisTracker, anchored_state
+
+
+@dataclass(frozen=True)
+class Hyp:
+    alignment: Sim2
+    score: float
+
+
+TRUE = Sim2(1.05, 0.4, (3.0, -2.0))
+MIRROR = Sim2(1.05, 0.4 + np.pi, (40.0, 25.0))  # the symmetric twin in a symmetric building
+FAR = Sim2(0.95, -1.2, (-30.0, 60.0))  # where a kidnapped robot turns out to be
+
+
+def sensor_at(round_index: int) -> np.ndarray:
+    """A sensor walking 0.8 m per round along a gentle curve, far from the odom origin."""
+    u = 0.8 * round_index
+    return np.array([50.0 + u, 20.0 + 3.0 * np.sin(u / 10.0)])
+
+
+def noisy(alignment: Sim2, rng, about=None, sigma_t=0.05, sigma_a=0.01) -> Sim2:
+    """A refined RANSAC hypothesis: its error is local to the BEV, i.e. about the sensor."""
+    centre = np.zeros(2) if about is None else np.asarray(about, dtype=float)
+    wobble = Sim2(1.0, rng.normal(0, sigma_a), rng.normal(0, sigma_t, 2))
+    return Sim2(1.0, 0.0, alignment.apply(centre)) @ wobble @ Sim2(1.0, 0.0, -alignment.apply(centre)) @ alignment
+
+
+def implied_error(mode_alignment: Sim2, truth: Sim2, sensor) -> float:
+    return float(np.linalg.norm(mode_alignment.apply(sensor) - truth.apply(sensor)))
+
+
+def run_rounds(tracker, start, stop, make_hyps, frames_per_round=5):
+    statuses = []
+    for r in range(start, stop):
+        tracker.update(make_hyps(r), sensor_at(r), frame=r * frames_per_round)
+        statuses.append(tracker.status)
+    return statuses
+
+
+def test_before_any_round_it_is_initializing_with_no_estimate():
+    tracker = HypothesisTracker(TrackingSettings())
+    assert tracker.status == "initializing"
+    assert tracker.best is None and tracker.modes == [] and tracker.warm_start() == []
+    assert tracker.pose_covariance(np.zeros(2), 0.0) is None
+    assert not tracker.confidently_tracking
+
+
+def test_consistent_mode_converges_and_tracks():
+    rng = make_rng(0, "consistent")
+    tracker = HypothesisTracker(TrackingSettings())
+    statuses = run_rounds(tracker, 0, 20, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.8 + rng.normal(0, 0.02))])
+    assert statuses[0] == "initializing"  # one sighting is not yet a confirmed mode
+    assert statuses[1:] == ["tracking"] * 19
+    assert len(tracker.modes) == 1
+    best = tracker.best
+    sensor = sensor_at(19)
+    assert implied_error(best.alignment, TRUE, sensor) < 0.1
+    assert abs(wrap_angle(best.alignment.theta - TRUE.theta)) < 0.01
+    assert best.weight == pytest.approx(1.0) and best.hits == 20 and best.age == 20
+    assert tracker.confidently_tracking
+    assert tracker.warm_start()[0] == best.alignment and tracker.alternatives() == []
+
+
+def test_tracker_follows_a_slowly_drifting_alignment():
+    rng = make_rng(0, "drift")
+    tracker = HypothesisTracker(TrackingSettings())
+
+    # Odometry heading drift: each round the locally correct alignment turns a little
+    # about the sensor's floorplan position (its implied pose there stays put).
+    truths = [TRUE]
+    for r in range(1, 30):
+        centre = truths[-1].apply(sensor_at(r))
+        turn = Sim2(1.0, 0.0, centre) @ Sim2(1.0, 0.004) @ Sim2(1.0, 0.0, -centre)
+        truths.append(turn @ truths[-1])
+    truth = truths.__getitem__
+
+    run_rounds(tracker, 0, 30, lambda r: [Hyp(noisy(truth(r), rng, sensor_at(r)), 0.75)])
+    assert tracker.status == "tracking"
+    assert implied_error(tracker.best.alignment, truth(29), sensor_at(29)) < 0.15
+    assert abs(wrap_angle(tracker.best.alignment.theta - truth(29).theta)) < 0.02
+
+
+def test_symmetric_building_is_ambiguous_then_resolves_to_the_survivor():
+    rng = make_rng(0, "symmetric")
+    tracker = HypothesisTracker(TrackingSettings())
+    both = lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.7), Hyp(noisy(MIRROR, rng, sensor_at(r)), 0.7 + rng.normal(0, 0.005))]  # noqa: E731
+    statuses = run_rounds(tracker, 0, 6, both)
+    assert statuses[1:] == ["ambiguous"] * 5
+    assert len(tracker.modes) == 2
+    assert all(m.weight > 0.3 for m in tracker.modes)
+    assert tracker.status == "ambiguous" and not tracker.confidently_tracking
+    # The mirror hypothesis stops appearing (the robot saw the asymmetric part).
+    statuses = run_rounds(tracker, 6, 10, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.72)])
+    assert statuses == ["tracking"] * 4
+    assert implied_error(tracker.best.alignment, TRUE, sensor_at(9)) < 0.15
+
+
+def test_ambiguity_resolves_when_one_score_drops():
+    rng = make_rng(1, "symmetric")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 5, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.7), Hyp(noisy(MIRROR, rng, sensor_at(r)), 0.7)])
+    assert tracker.status == "ambiguous"
+    statuses = run_rounds(tracker, 5, 9, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.75), Hyp(noisy(MIRROR, rng, sensor_at(r)), 0.45)])
+    assert statuses[-1] == "tracking"
+    assert implied_error(tracker.best.alignment, TRUE, sensor_at(8)) < 0.15
+
+
+def test_kidnapping_goes_lost_then_recovers_on_the_new_alignment():
+    rng = make_rng(0, "kidnap")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 10, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.8)])
+    assert tracker.status == "tracking"
+    # Kidnapped: the re-scored old alignment collapses, a distant one scores well.
+    after = run_rounds(tracker, 10, 16, lambda r: [Hyp(noisy(FAR, rng, sensor_at(r)), 0.8), Hyp(noisy(TRUE, rng, sensor_at(r)), 0.15)])
+    assert "lost" in after
+    first_lost = after.index("lost")
+    assert first_lost <= 2
+    assert after[-1] == "tracking"
+    assert after.index("tracking", first_lost) <= first_lost + 3
+    assert implied_error(tracker.best.alignment, FAR, sensor_at(15)) < 0.15
+
+
+def test_kidnapping_where_the_old_alignment_simply_vanishes():
+    rng = make_rng(1, "kidnap")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 8, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.8)])
+    after = run_rounds(tracker, 8, 14, lambda r: [Hyp(noisy(FAR, rng, sensor_at(r)), 0.7)])
+    assert "lost" in after and after[-1] == "tracking"
+    assert implied_error(tracker.best.alignment, FAR, sensor_at(13)) < 0.15
+
+
+def test_gating_wraps_angles_near_pi():
+    tracker = HypothesisTracker(TrackingSettings())
+    sensor = np.array([10.0, -4.0])
+    near_pi = Sim2(1.0, np.pi - 0.005, (1.0, 2.0))
+    # Same implied pose at the sensor, heading on the other side of the +-pi cut.
+    across = Sim2(1.0, -np.pi + 0.005, (0.0, 0.0))
+    across = Sim2(1.0, across.theta, near_pi.apply(sensor) - across.apply(sensor))
+    for frame, alignment in enumerate([near_pi, across, near_pi, across]):
+        tracker.update([Hyp(alignment, 0.8)], sensor, frame=frame)
+    assert len(tracker.modes) == 1 and tracker.modes[0].hits == 4
+    assert abs(abs(tracker.best.alignment.theta) - np.pi) < 0.01  # not averaged towards 0
+    assert tracker.status == "tracking"
+
+
+def test_coinciding_modes_merge_even_when_their_translations_differ_by_metres():
+    tracker = HypothesisTracker(TrackingSettings())
+    sensor = np.array([100.0, 0.0])
+    a = Sim2(1.0, 0.3, (5.0, 5.0))
+    # A 1 degree rotation about the sensor: same implied position, t differs by ~1.7 m.
+    b_rot = Sim2(1.0, a.theta + np.deg2rad(1.0))
+    b = Sim2(1.0, b_rot.theta, a.apply(sensor) - b_rot.apply(sensor))
+    assert np.linalg.norm(a.translation - b.translation) > 1.5
+    tracker.update([Hyp(a, 0.8), Hyp(b, 0.79)], sensor, frame=0)
+    assert len(tracker.modes) == 1
+    tracker.update([Hyp(b, 0.8)], sensor, frame=5)  # and b gates with the merged mode
+    assert len(tracker.modes) == 1 and tracker.modes[0].hits == 2
+
+
+def test_distinct_modes_do_not_merge():
+    tracker = HypothesisTracker(TrackingSettings())
+    sensor = np.array([0.0, 0.0])
+    tracker.update([Hyp(TRUE, 0.8), Hyp(Sim2(TRUE.s, TRUE.theta, TRUE.translation + [1.0, 0.0]), 0.8)], sensor, 0)
+    assert len(tracker.modes) == 2
+
+
+def test_weak_hypotheses_do_not_start_modes():
+    tracker = HypothesisTracker(TrackingSettings())
+    s = tracker.settings
+    tracker.update([Hyp(TRUE, 0.8), Hyp(MIRROR, 0.8 * s.birth_ratio - 0.05), Hyp(FAR, s.birth_min_score - 0.1)],
+                   np.zeros(2), 0)
+    assert len(tracker.modes) == 1
+    tracker.reset()
+    tracker.update([Hyp(TRUE, s.birth_min_score - 0.05)], np.zeros(2), 0)
+    assert tracker.modes == [] and tracker.status == "initializing"
+
+
+def test_low_scores_stay_initializing():
+    tracker = HypothesisTracker(TrackingSettings(birth_min_score=0.1))
+    statuses = run_rounds(tracker, 0, 5, lambda r: [Hyp(TRUE, 0.2)])
+    assert statuses == ["initializing"] * 5 and len(tracker.modes) == 1
+
+
+def test_bev_not_ready_reports_initializing():
+    tracker = HypothesisTracker(TrackingSettings())
+    for frame in range(3):
+        tracker.update([Hyp(TRUE, 0.8)], np.zeros(2), frame, bev_ready=False)
+    assert tracker.status == "initializing" and tracker.modes == []
+
+
+def test_fuzz_random_hypotheses_keep_the_bank_bounded_and_normalised():
+    settings = TrackingSettings()
+    rng = make_rng(0, "fuzz")
+    tracker = HypothesisTracker(settings)
+    for r in range(60):
+        n = int(rng.integers(0, 12))
+        hyps = [
+            Hyp(Sim2(np.exp(rng.normal(0, 0.2)), rng.uniform(-np.pi, np.pi), rng.uniform(-50, 50, 2)),
+                float(rng.uniform(-0.2, 0.9)))
+            for _ in range(n)
+        ]
+        tracker.update(hyps, rng.uniform(-20, 20, 2), frame=3 * r)
+        assert len(tracker.modes) <= settings.max_modes
+        assert tracker.status in ("initializing", "tracking", "ambiguous", "lost")
+        if tracker.modes:
+            assert sum(m.weight for m in tracker.modes) == pytest.approx(1.0)
+            assert all(m.weight >= settings.prune_weight for m in tracker.modes)
+            assert len({m.id for m in tracker.modes}) == len(tracker.modes)
+            for m in tracker.modes:
+                assert np.all(np.linalg.eigvalsh(m.local_covariance) > 0)
+
+
+def test_same_stream_gives_identical_results():
+    def run():
+        rng = make_rng(3, "determinism")
+        tracker = HypothesisTracker(TrackingSettings())
+        run_rounds(tracker, 0, 12, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.7), Hyp(noisy(MIRROR, rng, sensor_at(r)), 0.69)])
+        return [(m.id, m.weight, tuple(m.alignment.params())) for m in tracker.modes], tracker.status
+
+    assert run() == run()
+
+
+def test_pose_covariance_is_the_anchored_block_at_the_anchor_and_grows_with_lever_arm():
+    rng = make_rng(0, "cov")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 5, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.8)])
+    best = tracker.best
+    at_anchor = tracker.pose_covariance(sensor_at(4), yaw=0.3)
+    assert at_anchor.shape == (3, 3)
+    np.testing.assert_allclose(at_anchor, best.local_covariance[:3, :3])
+    far = tracker.pose_covariance(sensor_at(4) + [20.0, 0.0], yaw=0.3)
+    assert np.trace(far[:2, :2]) > np.trace(at_anchor[:2, :2]) + 20.0**2 * at_anchor[2, 2] * 0.5
+    np.testing.assert_allclose(far, far.T)
+    assert np.all(np.linalg.eigvalsh(far) > 0)
+
+
+def test_alignment_covariance_matches_a_sampled_linearisation():
+    rng = make_rng(0, "cov-params")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 3, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.8)])
+    mode = tracker.best
+    samples = rng.multivariate_normal(mode.state, mode.local_covariance * 1e-4, size=4000)
+    params = []
+    for x in samples:
+        s = np.exp(x[3])
+        t = x[:2] - s * Sim2(1.0, x[2]).R @ mode.anchor
+        params.append([t[0], t[1], x[2], x[3]])
+    sampled = np.cov(np.array(params).T) * 1e4
+    sd = np.sqrt(np.diag(mode.covariance))
+    # Compare correlations-scaled entries: 4000 samples pin each to a few per cent.
+    np.testing.assert_allclose(sampled / np.outer(sd, sd), mode.covariance / np.outer(sd, sd), atol=0.08)
+
+
+def test_anchored_state_is_the_implied_sensor_position():
+    sensor = np.array([3.0, 4.0])
+    x = anchored_state(TRUE, sensor)
+    np.testing.assert_allclose(x[:2], TRUE.apply(sensor))
+    assert x[2] == pytest.approx(TRUE.theta) and x[3] == pytest.approx(np.log(TRUE.s))
+
+
+def test_estimate_alternatives_list_best_first():
+    rng = make_rng(0, "alts")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 4, lambda r: [Hyp(noisy(TRUE, rng, sensor_at(r)), 0.7), Hyp(noisy(MIRROR, rng, sensor_at(r)), 0.65)])
+    alts = tracker.estimate_alternatives(sensor_at(3), yaw=0.1)
+    assert len(alts) == 2 and alts[0].alignment == tracker.best.alignment
+    assert alts[0].weight >= alts[1].weight
+    np.testing.assert_allclose(alts[0].pose[:2], tracker.best.alignment.apply(sensor_at(3)))
+
+
+@pytest.mark.parametrize(
+    "sensor, frame, hyps, fragment",
+    [
+        ([np.nan, 0.0], 0, [], "sensor_xy is not finite"),
+        ([1.0, 2.0, 3.0], 0, [], "sensor_xy must be 2 numbers"),
+        ([0.0, 0.0], 0, [Hyp(TRUE, float("nan"))], "hypothesis 0"),
+    ],
+)
+def test_bad_inputs_raise_input_error(sensor, frame, hyps, fragment):
+    with pytest.raises(InputError, match=fragment):
+        HypothesisTracker(TrackingSettings()).update(hyps, sensor, frame)
+
+
+def test_frames_must_not_go_backwards():
+    tracker = HypothesisTracker(TrackingSettings())
+    tracker.update([Hyp(TRUE, 0.8)], np.zeros(2), frame=10)
+    with pytest.raises(InputError, match="frame 5"):
+        tracker.update([Hyp(TRUE, 0.8)], np.zeros(2), frame=5)

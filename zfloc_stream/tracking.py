@@ -1,0 +1,387 @@
+"""Multi-hypothesis tracker: a bank of Kalman filters over the odom -> floorplan alignment.
+
+State of a mode, anchored at the sensor. The natural parameters (tx, ty, theta, log s) of
+an alignment are badly coupled: far from the odometry origin a tiny change of theta moves
+t by metres while the pose it implies at the sensor barely moves. The BEV that RANSAC
+aligns is centred on the sensor, so its errors are simple there. Each mode therefore
+keeps
+
+    x = (qx, qy, theta, log s),  q = s R(theta) a + t  (the implied position of the anchor a)
+
+with a = the sensor position (odometry plane) of the latest round. Gating, association,
+measurement noise and merging all live in this frame: a hypothesis is compared by the pose
+it implies at the current sensor. When the sensor moves from a to b the state is
+re-anchored exactly, q' = q + s R (b - a), and its covariance follows the Jacobian, so the
+angle uncertainty turns into position uncertainty in proportion to the distance moved.
+Drift is a random walk in x whose variance grows with frames elapsed and metres travelled.
+
+Weights come from an exponentially smoothed score per mode (fresh score when matched,
+`unobserved_score` when not): w_i = softmax(weight_gain * running_score_i). Deterministic:
+no randomness, ties broken by input order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from .config import TrackingSettings
+from .errors import InputError
+from .estimate import Alternative, Status
+from .sim2 import Sim2, wrap_angle
+
+
+class HypothesisLike(Protocol):
+    """What the tracker reads from a RANSAC hypothesis (estimation.ransac.Hypothesis)."""
+
+    alignment: Sim2
+    score: float
+
+
+def _perp(v: np.ndarray) -> np.ndarray:
+    """v rotated by +90 degrees: d/dtheta of R(theta) v is R(theta) perp(v)."""
+    return np.array([-v[1], v[0]])
+
+
+def anchored_state(alignment: Sim2, anchor: np.ndarray) -> np.ndarray:
+    """(qx, qy, theta, log s) of an alignment about the anchor point."""
+    qx, qy = alignment.apply(anchor)
+    return np.array([qx, qy, alignment.theta, np.log(alignment.s)])
+
+
+def _implied_jacobian(state: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """d/dstate of (q + s R offset, theta, log s): identity plus the lever-arm columns."""
+    scaled_r = np.exp(state[3]) * Sim2(1.0, state[2]).R
+    jac = np.eye(4)
+    jac[:2, 2] = scaled_r @ _perp(offset)
+    jac[:2, 3] = scaled_r @ offset
+    return jac
+
+
+@dataclass(eq=False)
+class Mode:
+    """One live hypothesis. Read its fields; only the tracker changes them."""
+
+    id: int
+    kf: KalmanFilter
+    anchor: np.ndarray  # (2,) odometry-plane point the state is expressed about
+    score: float  # latest fresh score C = Cc - Cv
+    running_score: float  # exponentially smoothed score, drives the weight
+    weight: float = 0.0  # normalised over modes
+    age: int = 1  # rounds since birth (1 in the round it was born)
+    hits: int = 1  # rounds in which a hypothesis matched it
+    collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
+    tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
+
+    @property
+    def state(self) -> np.ndarray:
+        """(qx, qy, theta, log s) about `anchor`."""
+        return self.kf.x.ravel().copy()
+
+    @property
+    def local_covariance(self) -> np.ndarray:
+        """4x4 covariance of `state` (anchored parametrisation)."""
+        return self.kf.P.copy()
+
+    @property
+    def alignment(self) -> Sim2:
+        qx, qy, theta, log_s = self.kf.x.ravel()
+        s = np.exp(log_s)
+        t = np.array([qx, qy]) - s * Sim2(1.0, theta).R @ self.anchor
+        return Sim2(s, theta, t)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """4x4 covariance of alignment.params() = (tx, ty, theta, log s)."""
+        jac = _implied_jacobian(self.kf.x.ravel(), -self.anchor)  # t = q + s R (0 - a)
+        return jac @ self.kf.P @ jac.T
+
+    def pose(self, sensor_xy, yaw: float) -> np.ndarray:
+        """(x, y, theta) of the sensor pose in the floorplan implied by this mode."""
+        return np.array(self.alignment.apply_pose(float(sensor_xy[0]), float(sensor_xy[1]), yaw))
+
+
+class HypothesisTracker:
+    """Filter bank fed once per RANSAC round with its ranked hypotheses."""
+
+    def __init__(self, settings: TrackingSettings | None = None):
+        self.settings = settings if settings is not None else TrackingSettings()
+        s = self.settings
+        self._meas_cov = np.diag(
+            [s.measurement_translation_std**2] * 2
+            + [np.deg2rad(s.measurement_angle_deg) ** 2, s.measurement_log_scale**2]
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        self.modes: list[Mode] = []
+        self._next_id = 0
+        self._anchor: np.ndarray | None = None
+        self._last_frame: int | None = None
+        self._bev_ready = False
+        self._tracked_id: int | None = None
+        self._was_lost = False
+        self._status: Status = "initializing"
+
+    # --- the round --------------------------------------------------------------------
+    def update(
+        self,
+        hypotheses: Sequence[HypothesisLike],
+        sensor_xy,
+        frame: int,
+        bev_ready: bool = True,
+    ) -> None:
+        """One RANSAC round: predict, gate, associate, update, birth, merge, prune, status.
+
+        sensor_xy: current sensor position in the odometry plane. bev_ready=False (the BEV
+        is too small to trust) only moves the filters forward and reports initializing.
+        """
+        sensor = self._check_inputs(hypotheses, sensor_xy, frame)
+        self._predict(sensor, frame)
+        self._bev_ready = bool(bev_ready)
+        if not self._bev_ready:
+            self._status = "initializing"
+            return
+        order = sorted(range(len(hypotheses)), key=lambda j: -float(hypotheses[j].score))
+        hyps = [hypotheses[j] for j in order]
+        scores = np.array([float(h.score) for h in hyps])
+        meas = [anchored_state(h.alignment, sensor) for h in hyps]
+        matched, explained = self._associate(meas)
+        round_is_strong = len(scores) > 0 and scores[0] >= self.settings.min_score
+        for mode in self.modes:
+            self._score_mode(mode, matched.get(mode.id), meas, scores, round_is_strong)
+            mode.age += 1
+        for j in range(len(hyps)):
+            if not explained[j] and self._may_birth(scores[j], scores[0]):
+                self._birth(meas[j], scores[j], sensor)
+        self._merge()
+        self._reweight_and_prune()
+        self._update_status()
+
+    def _check_inputs(self, hypotheses, sensor_xy, frame) -> np.ndarray:
+        try:
+            sensor = np.asarray(sensor_xy, dtype=float).reshape(2)
+        except (TypeError, ValueError):
+            raise InputError(f"tracker: sensor_xy must be 2 numbers, got {sensor_xy!r}") from None
+        if not np.isfinite(sensor).all():
+            raise InputError(f"tracker: sensor_xy is not finite: {sensor}")
+        if self._last_frame is not None and int(frame) < self._last_frame:
+            raise InputError(f"tracker: frame {frame} comes before the last round's frame {self._last_frame}")
+        for j, h in enumerate(hypotheses):
+            if not (np.isfinite(float(h.score)) and h.alignment.is_finite()):
+                raise InputError(f"tracker: hypothesis {j} has a non-finite score or alignment")
+        return sensor
+
+    def _predict(self, sensor: np.ndarray, frame: int) -> None:
+        """Re-anchor every mode at the sensor, then add random-walk drift."""
+        s = self.settings
+        frames = 1 if self._last_frame is None else max(int(frame) - self._last_frame, 1)
+        metres = 0.0 if self._anchor is None else float(np.linalg.norm(sensor - self._anchor))
+        q = np.diag(
+            [frames * s.process_translation_std_per_frame**2 + metres * s.process_translation_std_per_m**2] * 2
+            + [
+                frames * np.deg2rad(s.process_angle_deg_per_frame) ** 2
+                + metres * np.deg2rad(s.process_angle_deg_per_m) ** 2,
+                frames * s.process_log_scale_per_frame**2 + metres * s.process_log_scale_per_m**2,
+            ]
+        )
+        for mode in self.modes:
+            x = mode.kf.x.ravel()
+            offset = sensor - mode.anchor
+            jac = _implied_jacobian(x, offset)
+            x_new = x.copy()
+            x_new[:2] += np.exp(x[3]) * Sim2(1.0, x[2]).R @ offset
+            mode.kf.x = x_new.reshape(4, 1)
+            mode.kf.P = jac @ mode.kf.P @ jac.T
+            mode.kf.predict(Q=q)
+            mode.anchor = sensor.copy()
+        self._anchor = sensor.copy()
+        self._last_frame = int(frame)
+
+    def _residual(self, mode: Mode, z: np.ndarray) -> np.ndarray:
+        y = z - mode.kf.x.ravel()
+        y[2] = wrap_angle(y[2])  # theta near +-pi must not look 2 pi away
+        return y
+
+    def _associate(self, meas: list[np.ndarray]) -> tuple[dict[int, int], np.ndarray]:
+        """Greedy by score: each hypothesis takes the nearest free mode inside its gate.
+
+        Returns mode id -> hypothesis index, and which hypotheses gated with any mode (those
+        never start a mode: they are another view of a live one).
+        """
+        explained = np.zeros(len(meas), dtype=bool)
+        matched: dict[int, int] = {}
+        for j, z in enumerate(meas):
+            best_id, best_d2 = None, np.inf
+            for mode in self.modes:
+                y = self._residual(mode, z)
+                d2 = float(y @ np.linalg.solve(mode.kf.P + self._meas_cov, y))
+                if d2 > self.settings.gate_chi2:
+                    continue
+                explained[j] = True
+                if mode.id not in matched and d2 < best_d2:
+                    best_id, best_d2 = mode.id, d2
+            if best_id is not None:
+                matched[best_id] = j
+        return matched, explained
+
+    def _score_mode(self, mode: Mode, j: int | None, meas, scores, round_is_strong: bool) -> None:
+        s = self.settings
+        if j is None:
+            fresh = s.unobserved_score
+            # Unseen while the round found something strong elsewhere: the evidence moved.
+            mode.collapses = mode.collapses + 1 if round_is_strong else mode.collapses
+        else:
+            fresh = float(scores[j])
+            z = mode.kf.x.ravel() + self._residual(mode, meas[j])
+            mode.kf.update(z.reshape(4, 1), R=self._meas_cov)
+            mode.kf.x[2, 0] = wrap_angle(mode.kf.x[2, 0])
+            mode.score = fresh
+            mode.hits += 1
+            collapsed = fresh < s.lost_score_ratio * mode.running_score
+            mode.collapses = mode.collapses + 1 if collapsed else 0
+        mode.running_score = (1.0 - s.score_smoothing) * mode.running_score + s.score_smoothing * fresh
+
+    def _may_birth(self, score: float, best_score: float) -> bool:
+        s = self.settings
+        return score >= s.birth_min_score and score >= s.birth_ratio * best_score
+
+    def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray) -> None:
+        kf = KalmanFilter(dim_x=4, dim_z=4)
+        kf.x = z.reshape(4, 1).copy()
+        kf.P = self._meas_cov.copy()  # one measurement is all it knows
+        kf.F = np.eye(4)
+        kf.H = np.eye(4)
+        kf.R = self._meas_cov.copy()
+        self.modes.append(Mode(self._next_id, kf, sensor.copy(), score, score))
+        self._next_id += 1
+
+    def _merge(self) -> None:
+        """Modes implying the same sensor pose are one: the one with more evidence stays."""
+        s = self.settings
+        limits = np.array([s.merge_translation, np.deg2rad(s.merge_angle_deg), s.merge_log_scale])
+        keep: list[Mode] = []
+        for mode in sorted(self.modes, key=lambda m: (-m.running_score, m.id)):
+            x = mode.kf.x.ravel()
+            twin = None
+            for kept in keep:
+                d = x - kept.kf.x.ravel()
+                gaps = np.array([np.hypot(d[0], d[1]), abs(wrap_angle(d[2])), abs(d[3])])
+                if (gaps <= limits).all():
+                    twin = kept
+                    break
+            if twin is None:
+                keep.append(mode)
+            else:
+                twin.hits = max(twin.hits, mode.hits)
+                twin.age = max(twin.age, mode.age)
+                twin.tracked_rounds = max(twin.tracked_rounds, mode.tracked_rounds)
+                if mode.id == self._tracked_id:
+                    self._tracked_id = twin.id
+        self.modes = sorted(keep, key=lambda m: m.id)
+
+    def _reweight_and_prune(self) -> None:
+        s = self.settings
+        self._normalise()
+        by_weight = sorted(self.modes, key=lambda m: (-m.weight, m.id))
+        self.modes = sorted(
+            [m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight], key=lambda m: m.id
+        )
+        self._normalise()
+
+    def _normalise(self) -> None:
+        if not self.modes:
+            return
+        logits = self.settings.weight_gain * np.array([m.running_score for m in self.modes])
+        w = np.exp(logits - logits.max())
+        w /= w.sum()
+        for mode, wi in zip(self.modes, w):
+            mode.weight = float(wi)
+
+    # --- status -----------------------------------------------------------------------
+    def _update_status(self) -> None:
+        s = self.settings
+        tracked = self._mode_by_id(self._tracked_id)
+        if self._tracked_id is not None and (
+            tracked is None or tracked.collapses >= s.lost_rounds or tracked.running_score < s.min_score
+        ):
+            # The mode we were sure of fell apart: report it and drop it, so the next
+            # strong hypothesis (found by the global search the localizer runs) takes over.
+            self.modes = [m for m in self.modes if m.id != self._tracked_id]
+            self._normalise()
+            self._tracked_id, self._was_lost, self._status = None, True, "lost"
+            return
+        leader = self.best
+        confirmed = [m for m in self.modes if m.hits >= s.confirm_rounds]
+        waiting: Status = "lost" if self._was_lost else "initializing"
+        if leader is None or leader.hits < s.confirm_rounds or leader.running_score < s.min_score:
+            self._tracked_id, self._status = None, waiting
+        elif any(m is not leader and m.weight >= s.ambiguity_ratio * leader.weight for m in confirmed):
+            self._tracked_id, self._status = None, "ambiguous"
+        else:
+            if self._tracked_id != leader.id:
+                leader.tracked_rounds = 0
+            leader.tracked_rounds += 1
+            self._tracked_id, self._was_lost, self._status = leader.id, False, "tracking"
+        for mode in self.modes:
+            if mode.id != self._tracked_id:
+                mode.tracked_rounds = 0
+
+    def _mode_by_id(self, mode_id: int | None) -> Mode | None:
+        return next((m for m in self.modes if m.id == mode_id), None)
+
+    @property
+    def status(self) -> Status:
+        """initializing | tracking | ambiguous | lost, as of the latest round."""
+        return self._status
+
+    @property
+    def confidently_tracking(self) -> bool:
+        """One dominant mode tracked for confident_rounds rounds: fewer RANSAC samples will do."""
+        best = self.best
+        return (
+            self._status == "tracking"
+            and best is not None
+            and best.tracked_rounds >= self.settings.confident_rounds
+        )
+
+    # --- views ------------------------------------------------------------------------
+    @property
+    def best(self) -> Mode | None:
+        """The reported mode: the heaviest confirmed mode, else the heaviest mode."""
+        if not self.modes:
+            return None
+        confirmed = [m for m in self.modes if m.hits >= self.settings.confirm_rounds]
+        return max(confirmed or self.modes, key=lambda m: (m.weight, -m.id))
+
+    def alternatives(self) -> list[Mode]:
+        """Every live mode except best, heaviest first."""
+        best = self.best
+        return sorted((m for m in self.modes if m is not best), key=lambda m: (-m.weight, m.id))
+
+    def warm_start(self) -> list[Sim2]:
+        """Alignments of the live modes, heaviest first, for the next round to refine first."""
+        return [m.alignment for m in sorted(self.modes, key=lambda m: (-m.weight, m.id))]
+
+    def estimate_alternatives(self, sensor_xy, yaw: float) -> tuple[Alternative, ...]:
+        """Every live mode (best first) as estimate.Alternative at the given odometry pose."""
+        best = self.best
+        ordered = ([best] if best is not None else []) + self.alternatives()
+        return tuple(Alternative(m.alignment, m.pose(sensor_xy, yaw), m.weight, m.score) for m in ordered)
+
+    def pose_covariance(self, sensor_xy, yaw: float = 0.0, mode: Mode | None = None) -> np.ndarray | None:
+        """3x3 covariance of the implied floorplan pose (x, y, theta) of a sensor at sensor_xy.
+
+        Linearised through x = q + s R (p - a), theta_f = yaw + theta. The heading enters
+        additively, so yaw does not change the result (it is taken for a uniform signature).
+        None when there is no mode.
+        """
+        mode = mode if mode is not None else self.best
+        if mode is None:
+            return None
+        offset = np.asarray(sensor_xy, dtype=float).reshape(2) - mode.anchor
+        jac = _implied_jacobian(mode.kf.x.ravel(), offset)[:3]
+        return jac @ mode.kf.P @ jac.T
