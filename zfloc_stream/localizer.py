@@ -104,7 +104,7 @@ class Localizer:
         else:
             alignment = best.alignment
             pose = np.array(alignment.apply_pose(*plane_pose))
-            cov = self.tracker.pose_covariance(best, plane_pose)
+            cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         alternatives = ()
         if plane_pose is not None:
