@@ -26,9 +26,12 @@ class Section(BaseModel):
 class LineSettings(Section):
     """Seeded region growing (paper 3.1)."""
 
-    neighbourhood_radius: float = 0.25  # m, PCA neighbourhood of a seed, in units of the point spacing scale
+    neighbourhood_radius: float = 0.25  # m, PCA neighbourhood of a seed
+    min_seed_neighbours: int = 3  # fewer free points around a seed: it is noise
+    local_radius: float = 2.0  # m, a line first grows inside this window around its seed (speed)
     inlier_distance: float = 0.05  # m, orthogonal distance to grow a line
     gap: float = 0.3  # m, largest gap along a line before it is split
+    max_grow_iterations: int = 20  # refit/regrow rounds per seed (usually converges in 2-4)
     min_points: int = 8
     min_length: float = 0.5  # m
     dedup_angle_deg: float = 5.0  # near-duplicate suppression
@@ -47,6 +50,9 @@ class CircleSettings(Section):
     min_coverage_deg: float = 120.0  # 2*pi minus the largest angular gap
     max_gap_deg: float = 30.0  # angular continuity: consecutive gaps below this...
     min_span_deg: float = 90.0  # ...over a contiguous span at least this long
+    group_link_distance: float = 0.15  # m, points closer than this are one group; groups wider than a pillar are skipped
+    refit_rounds: int = 2  # least-squares refit + inlier re-selection rounds
+    refit_iterations: int = 10  # Gauss-Newton steps per refit
 
 
 class PrimitiveSettings(Section):
@@ -57,6 +63,8 @@ class PrimitiveSettings(Section):
 class FloorplanSettings(Section):
     neighbour_distance: float = 6.0  # m, lines closer than this are spatial neighbours (3L pruning)
     wall_sample_spacing: float = 0.05  # m, floorplan wall pixels used by Cv are subsampled to this
+    line_point_spacing: float = 0.025  # m, wall-face pixels are subsampled to this before line extraction
+    image_wall_threshold: float = 0.5  # plain images: occupancy (255 - v) / 255 above this is wall
 
 
 class SolverSettings(Section):
