@@ -335,7 +335,17 @@ class HypothesisTracker:
 
     @property
     def status(self) -> Status:
-        """initializing | tracking | ambiguous | lost, as of the latest round."""
+        """As of the latest round:
+
+        lost         the tracked mode collapsed (fresh score < lost_score_ratio * running
+                     score, or unseen in a strong round, lost_rounds rounds in a row; or its
+                     running score fell below min_score; or it was pruned); it stays lost
+                     until a confirmed mode dominates again
+        initializing no round yet, BEV not ready, or no confirmed mode with running score
+                     >= min_score (never tracked before)
+        ambiguous    another confirmed mode has weight >= ambiguity_ratio * best's
+        tracking     one confirmed mode dominates
+        """
         return self._status
 
     @property
