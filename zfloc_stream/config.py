@@ -75,6 +75,10 @@ class SolverSettings(Section):
     scale_prior_window: float = 0.1
     min_scale: float = 0.5  # models outside [min_scale, max_scale] are discarded
     max_scale: float = 2.0
+    parallel_angle_deg: float = 10.0  # lines closer than this in direction count as parallel (degenerate)
+    min_baseline: float = 0.3  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
+    singular_tolerance: float = 1e-9  # relative determinant below which a linear solve is degenerate
+    radius_tolerance: float = 0.5  # 2C/LC: model rejected when r_floorplan / (s r_bev) leaves [1/(1+x), 1+x]
 
 
 class ScoringSettings(Section):
@@ -107,22 +111,73 @@ class EstimatorSettings(Section):
 
 
 class GravitySettings(Section):
+    """Floor-plane fit (paper 3.1): the downward normal of the floor is gravity.
+
+    Frames arriving before gravity is known wait in a bounded buffer; gravity is frozen
+    once min_frames frames brought min_floor_points floor points, then the buffer is fused.
+    """
+
     trust_odometry: bool = False  # VIO already gravity-aligned: take -z of odom as gravity
+    min_floor_points: int = 300  # accumulated floor points needed before gravity is frozen
+    min_frames: int = 2  # frames contributing floor points before gravity is frozen
+    points_per_frame: int = 1000  # floor points kept per frame (random subsample)
+    max_points: int = 10000  # cap on accumulated floor points
+    ransac_iterations: int = 100  # 3-point plane hypotheses
+    inlier_distance: float = 0.03  # m, point-to-plane distance of a floor inlier
+    refine_iterations: int = 3  # PCA re-fits on the inliers of the previous fit
+    max_pending_frames: int = 20  # frames buffered while gravity is unknown (oldest dropped)
+    floor_height_smoothing: float = 0.2  # EMA factor of a frame's floor height (tracks slow z drift)
 
 
 class WallMaskSettings(Section):
+    """Gravity-aligned column filter on the wall mask (paper eqs. 1-5)."""
+
     enabled: bool = True
-    tau_d: float = 0.3  # m (paper's tau_d)
+    tau_d: float = 0.3  # m (paper's tau_d): a non-wall pixel deeper than median + tau_d drops the column
+    segment_gap: float = 0.3  # m, depth gap that splits a column's wall pixels into segments
+    min_forward_depth: float = 0.05  # m, points closer than this to the upright image plane are not warped
+
+
+class LabellerSettings(Section):
+    """Geometric labeller for frames without labels (gravity frame, depth normals)."""
+
+    floor_tolerance: float = 0.08  # m, |height above floor| below this (and normal up): floor
+    vertical_normal_max_z: float = 0.35  # |n_z| below this: a vertical surface
+    horizontal_normal_min_z: float = 0.85  # |n_z| above this: a horizontal surface
+    wall_min_height: float = 0.3  # m above floor, lower vertical surfaces are clutter ("other")
+    ceiling_min_height: float = 1.8  # m above floor, horizontal surfaces higher than this: ceiling
+    normal_step: int = 2  # px, finite-difference step for depth normals
+    max_tilt_deg: float = 35.0  # bootstrap: floor normal within this of the camera's up axis
+    bootstrap_min_below: float = 0.5  # m, bootstrap floor candidates lie this far below the camera
 
 
 class FrontendSettings(Section):
     gravity: GravitySettings = GravitySettings()
     wall_mask: WallMaskSettings = WallMaskSettings()
+    labeller: LabellerSettings = LabellerSettings()
+    pixel_stride: int = 4  # camera pixels used: every pixel_stride-th row and column
+    max_depth: float = 10.0  # m, depth readings beyond this are ignored
+    min_obstacle_height: float = 0.1  # m above floor: lower non-floor points do not occupy
+    max_obstacle_height: float = 2.0  # m above floor: higher points do not occupy (ceiling, lamps)
 
 
 class BevSettings(Section):
+    """Rolling log-odds BEV in the gravity-aligned odometry plane (scrolling fixed-size grid)."""
+
     resolution: float = 0.05  # m per cell
     window_radius: float = 15.0  # m, cells farther than this from the sensor are dropped
+    recenter_distance: float = 1.0  # m, the grid scrolls when the sensor leaves this box around its centre
+    logodds_hit: float = 0.85  # added to a cell holding an obstacle point (once per frame)
+    logodds_free: float = -0.4  # added to a cell crossed by a ray (once per frame)
+    logodds_min: float = -2.0  # clamp, so old evidence can be overturned
+    logodds_max: float = 3.5
+    free_threshold: float = -0.3  # log-odds below this: observed free space
+    occupied_threshold: float = 0.0  # log-odds above this: occupied
+    wall_min_observations: int = 1  # frames that saw wall evidence in a cell before it is a wall point
+    free_margin: float = 0.1  # m, rays stop this short of the obstacle they hit
+    azimuth_bin_deg: float = 0.5  # camera free space: one ray per azimuth bin
+    crop_margin: float = 0.5  # m, observation is cropped to the known cells plus this margin
+    trajectory_length: int = 10000  # plane poses kept (bounded memory)
 
 
 class TrackingSettings(Section):
@@ -167,6 +222,80 @@ class LocalizerSettings(Section):
     min_primitives: int = 3  # lines + circles needed before the first round
 
 
+class LoggingSettings(Section):
+    """MCAP session logs (zfloc_stream/session): what is written, how it is chunked, and
+    how files from other tools are read. Never affects the estimates."""
+
+    compression: Literal["zstd", "lz4", "none"] = "zstd"  # per-chunk compression
+    chunk_size: int = 1048576  # bytes; a chunk is closed once its records exceed this...
+    chunk_max_frames: int = 10  # ...or after this many frames: bounds what a crash loses
+    bev_every_n_frames: int = 10  # publish /zfloc/bev every n frames (0 = never)
+    foreign_scan_range_min: float = 0.01  # m, LaserScan without zfloc range metadata
+    foreign_scan_range_max: float = 100.0  # m
+    success_distance: float = 1.0  # m, replay summary: SR@1m as in the paper...
+    success_last_frames: int = 10  # ...every one of the final frames within the distance
+
+
+class OdometrySettings(Section):
+    """Synthetic odometry for logs whose poses are ground truth (Gibson(t), Carmen): the
+    localizer only ever sees relative motion, re-expressed from a random odom origin."""
+
+    noise: float = 0.0  # drift fraction: per-step translation noise std = noise * step length (0 = exact relative motion)
+    heading_noise_per_m: float = 0.05  # rad per metre travelled, scaled by noise (heading drift from translation)
+    origin_extent: float = 50.0  # m, odom origin drawn uniformly in [-extent, extent]^2, heading uniform
+
+
+class GibsonSettings(Section):
+    """Gibson(t) (F3Loc release): 40 z-depths per frame become a small synthetic depth image.
+    Camera and wall heights are not in the data; these are assumptions (documented in gibson.py)."""
+
+    image_rows: int = 30  # synthesised rows for 40 columns (the 640x480 camera's aspect)
+    focal_fraction: float = 0.375  # fx / image width (F3Loc's F_W): ~106 deg horizontal fov
+    camera_height: float = 1.0  # m above the floor (assumed)
+    wall_height: float = 2.6  # m, floor to ceiling (assumed)
+    map_resolution: float = 0.01  # m per map.png pixel
+    split: str = "test"  # split.yaml entry used when a spec names none
+
+
+class CarmenSettings(Section):
+    flaser_fov_deg: float = 180.0  # FLASER: n beams spread over this...
+    flaser_start_deg: float = -90.0  # ...starting here (counter-clockwise from forward)
+    max_range: float = 80.0  # m, FLASER readings at or beyond this are no-returns (SICK reports 81.83)
+    min_range: float = 0.01  # m, shorter readings are no-returns
+    heldout_margin: int = 25  # scans: a study window's map leaves out [start - margin, stop + margin)
+
+
+class MappingSettings(Section):
+    """map-from-log: log-odds occupancy from scans with known poses."""
+
+    resolution: float = 0.05  # m per cell
+    logodds_hit: float = 0.85  # added to a cell holding a beam end (once per scan)
+    logodds_free: float = -0.4  # added to a cell crossed by a beam (once per scan)
+    occupied_threshold: float = 1.0  # log-odds above this: wall
+    free_range: float = 15.0  # m, beams (and no-returns) clear free space up to this range
+    padding: float = 1.0  # m of unknown margin around the mapped area
+
+
+class SimDatasetSettings(Section):
+    n_frames: int = 300  # frames simulated per built-in scene
+
+
+class DatasetSettings(Section):
+    odometry: OdometrySettings = OdometrySettings()
+    gibson: GibsonSettings = GibsonSettings()
+    carmen: CarmenSettings = CarmenSettings()
+    mapping: MappingSettings = MappingSettings()
+    sim: SimDatasetSettings = SimDatasetSettings()
+
+
+class StudySettings(Section):
+    """SR-vs-length studies (F3Loc protocol)."""
+
+    eval_frames: int = 10  # success/RMSE look at this many final frames of a chunk
+    thresholds: list[float] = [1.0, 0.5]  # m, success thresholds reported (<= counts as success)
+    max_chunks_per_sequence: int = 20  # consecutive non-overlapping chunks kept per sequence and length
+
+
 class Settings(Section):
     seed: int = 0
     floorplan: FloorplanSettings = FloorplanSettings()
@@ -176,6 +305,9 @@ class Settings(Section):
     bev: BevSettings = BevSettings()
     tracking: TrackingSettings = TrackingSettings()
     localizer: LocalizerSettings = LocalizerSettings()
+    logging: LoggingSettings = LoggingSettings()
+    datasets: DatasetSettings = DatasetSettings()
+    study: StudySettings = StudySettings()
 
 
 def _merge(base: dict, update: dict) -> dict:

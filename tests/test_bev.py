@@ -1,0 +1,122 @@
+import numpy as np
+import pytest
+
+from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.errors import ConfigError, FrameError, InputError
+from zfloc_stream.frames import LaserFrame
+from zfloc_stream.frontend.bev import RollingBEV
+from zfloc_stream.rng import make_rng
+
+ROOM = (0.0, 0.0, 10.0, 6.0)  # x0, y0, x1, y1: an empty rectangular room
+
+
+def pose(x, y, yaw, z=0.0):
+    T = np.eye(4)
+    c, s = np.cos(yaw), np.sin(yaw)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+def box_ranges(x, y, yaw, angles, box=ROOM):
+    """Exact ranges from (x, y) inside an axis-aligned box."""
+    x0, y0, x1, y1 = box
+    a = yaw + angles
+    c, s = np.cos(a), np.sin(a)
+    with np.errstate(divide="ignore"):
+        tx = np.where(c > 0, (x1 - x) / c, np.where(c < 0, (x0 - x) / c, np.inf))
+        ty = np.where(s > 0, (y1 - y) / s, np.where(s < 0, (y0 - y) / s, np.inf))
+    return np.minimum(tx, ty)
+
+
+def laser(x, y, yaw, n=360, fov=2 * np.pi, noise=0.0, rng=None, box=ROOM, t=0.0):
+    angles = -fov / 2 + fov * np.arange(n) / n
+    r = box_ranges(x, y, yaw, angles, box)
+    if noise:
+        r = r + rng.normal(0, noise, r.shape)
+    return LaserFrame(r, -fov / 2, fov / n, 0.05, 30.0, pose(x, y, yaw), t)
+
+
+def distance_to_box_walls(p, box=ROOM):
+    x0, y0, x1, y1 = box
+    return np.min(np.abs(np.stack([p[:, 0] - x0, p[:, 0] - x1, p[:, 1] - y0, p[:, 1] - y1])), axis=0)
+
+
+def test_laser_hits_land_on_walls_and_interior_is_free():
+    bev = RollingBEV(Settings())
+    rng = make_rng(0, "test")
+    for i, (x, y) in enumerate([(2, 2), (3, 3), (5, 3), (7, 2.5), (8, 4)]):
+        bev.add(laser(x, y, 0.3 * i, noise=0.01, rng=rng, t=i))
+    obs = bev.observation(make_rng(0, "obs"))
+    d = distance_to_box_walls(obs.wall_points)
+    assert len(obs.wall_points) > 300
+    assert np.quantile(d, 0.99) < 0.1  # every wall point within two cells of a true wall
+    inner = np.stack(np.meshgrid(np.linspace(1, 9, 30), np.linspace(1, 5, 20)), -1).reshape(-1, 2)
+    assert obs.free_at(inner).mean() > 0.95
+    outside = np.array([[-1.0, 3.0], [11.0, 3.0], [5.0, -1.0], [5.0, 7.5]])
+    assert not obs.free_at(outside).any()  # nothing seen behind the walls
+    # clearance: ~ distance to the nearest wall inside the room, 0 outside free space
+    c = obs.clearance_at(np.array([[5.0, 3.0], [1.0, 3.0]]))
+    assert c[0] == pytest.approx(3.0, abs=0.15) and c[1] == pytest.approx(1.0, abs=0.15)
+    assert obs.clearance_at(outside).max() == 0.0
+    assert obs.trajectory.shape == (5, 3)
+    assert np.allclose(obs.trajectory[-1], [8, 4, 1.2])
+
+
+def test_laser_lines_are_extracted_when_primitives_exist():
+    pytest.importorskip("zfloc_stream.primitives")
+    bev = RollingBEV(Settings())
+    for i, (x, y) in enumerate([(2, 2), (5, 3), (8, 4)]):
+        bev.add(laser(x, y, 0.0, t=i))
+    obs = bev.observation(make_rng(0, "obs"))
+    assert len(obs.lines) >= 4
+    n = np.abs(obs.lines.normals)
+    assert np.all((n.max(axis=1) > 0.99))  # axis-aligned walls
+
+
+def test_empty_bev_raises_input_error():
+    bev = RollingBEV(Settings())
+    with pytest.raises(InputError, match="empty"):
+        bev.observation(make_rng(0))
+    with pytest.raises(FrameError):
+        bev.add("not a frame")
+
+
+def test_bad_bev_settings_raise_config_error():
+    with pytest.raises(ConfigError):
+        RollingBEV(load_settings(overrides=["bev.resolution=0"]))
+
+
+def test_grid_scrolls_and_memory_stays_flat_along_a_long_corridor():
+    # a 200 m corridor, 2 m wide: walk along it; the grid must scroll and keep its size
+    settings = load_settings(overrides=["bev.window_radius=5.0"])
+    bev = RollingBEV(settings)
+    box = (0.0, 0.0, 200.0, 2.0)
+    sizes = []
+    for i in range(150):
+        x = 1.0 + i * 1.3
+        bev.add(laser(x, 1.0, 0.0, n=180, box=box, t=i))
+        sizes.append(bev.memory_bytes())
+    assert sizes[-1] == sizes[10]  # flat: fixed grid + bounded buffers
+    obs = bev.observation(make_rng(0))
+    # only the last window survives: every wall point is near the sensor
+    d = np.hypot(*(obs.wall_points - [x, 1.0]).T)
+    assert d.max() < 5.0 + 1.0 + 0.5 * np.sqrt(2) * 2
+    side = obs.wall_points[:, 0] < 199.9  # the rest lies on the end wall x = 200
+    assert np.all(np.abs(obs.wall_points[side, 1] - 1.0) > 0.9)  # on the corridor walls y=0, y=2
+    assert obs.free_at(np.array([[x - 2.0, 1.0]])).all()
+    assert not obs.free_at(np.array([[20.0, 1.0]])).any()  # far behind: dropped
+
+
+def test_same_input_same_observation():
+    def run():
+        bev = RollingBEV(Settings())
+        rng = make_rng(3, "noise")
+        for i in range(4):
+            bev.add(laser(2 + i, 3, 0.2 * i, noise=0.02, rng=rng, t=i))
+        return bev.observation(make_rng(0, "obs"))
+
+    a, b = run(), run()
+    assert np.array_equal(a.wall_points, b.wall_points)
+    assert np.array_equal(a.free, b.free)
+    assert np.array_equal(a.lines.offsets, b.lines.offsets)

@@ -1,0 +1,352 @@
+"""RollingBEV: frames fused into a bounded log-odds bird's-eye view in the plane frame.
+
+Plane frame: the gravity-aligned odometry frame (gravity.py; for 2D lasers the odometry
+plane itself). Per cell the grid keeps
+  - log-odds occupancy: + logodds_hit for a cell holding an obstacle point, + logodds_free
+    for a cell crossed by a ray (each at most once per frame), clamped;
+  - wall evidence: number of frames that put a (refined) wall point / laser hit there.
+
+Free space is ray cast in 2D: per frame the rays from the sensor's plane position to its
+observed points form a star-shaped polygon (one vertex per laser beam, or per azimuth bin
+for cameras), filled with cv2.fillPoly; the frame's own hit cells are never freed.
+
+Bounded: the grid is a fixed-size square of half-side window_radius + recenter_distance
+that scrolls (content shifted, the part leaving dropped) whenever the sensor leaves a box
+of half-side recenter_distance around its centre. It therefore always holds the disc of
+radius window_radius around the sensor, and the cost of an update or of a scroll does not
+grow with session length.
+
+Cameras before gravity is known: frames wait in a bounded buffer (gravity settings) while
+their floor points feed the GravityEstimator; once gravity is frozen they are fused in
+order.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import cv2
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from ..config import Settings
+from ..errors import ConfigError, FrameError, InputError
+from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
+from ..geometry import CircleSet, LineSet
+from ..observation import BevObservation
+from ..rng import make_rng
+from .gravity import GravityEstimator, plane_pose
+from .labeller import label_frame, bootstrap_floor_mask, depth_normals
+from .wallmask import refine_wall_mask, upright_rotation
+
+_SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
+
+
+class _ScrollingGrid:
+    """Fixed-size square grid addressed by global integer cell indices (ix0, iy0 = cell (0, 0))."""
+
+    def __init__(self, n: int, resolution: float):
+        self.n = n
+        self.res = resolution
+        self.ix0 = self.iy0 = None
+        self.logodds = np.zeros((n, n), dtype=np.float32)
+        self.wall = np.zeros((n, n), dtype=np.uint16)
+
+    def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
+        cx, cy = (int(np.floor(v / self.res)) for v in xy)
+        half = self.n // 2
+        if self.ix0 is None:
+            self.ix0, self.iy0 = cx - half, cy - half
+            return
+        dx, dy = cx - half - self.ix0, cy - half - self.iy0
+        if max(abs(dx), abs(dy)) <= slack_cells:
+            return
+        self.logodds = _shifted(self.logodds, dy, dx)
+        self.wall = _shifted(self.wall, dy, dx)
+        self.ix0 += dx
+        self.iy0 += dy
+
+    def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) of the points inside the grid."""
+        col = np.floor(xy[:, 0] / self.res).astype(np.int64) - self.ix0
+        row = np.floor(xy[:, 1] / self.res).astype(np.int64) - self.iy0
+        inside = (row >= 0) & (row < self.n) & (col >= 0) & (col < self.n)
+        return row[inside], col[inside]
+
+    def unique_flat(self, xy: np.ndarray) -> np.ndarray:
+        row, col = self.cells(xy)
+        return np.unique(row * self.n + col)
+
+
+def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """out[r, c] = a[r + dy, c + dx], zero where that falls outside a."""
+    out = np.zeros_like(a)
+    h, w = a.shape
+    src_r, dst_r = slice(max(dy, 0), min(h, h + dy)), slice(max(-dy, 0), min(h, h - dy))
+    src_c, dst_c = slice(max(dx, 0), min(w, w + dx)), slice(max(-dx, 0), min(w, w - dx))
+    if src_r.start < src_r.stop and src_c.start < src_c.stop:
+        out[dst_r, dst_c] = a[src_r, src_c]
+    return out
+
+
+class RollingBEV:
+    """Bounded BEV of the last window_radius metres around the sensor.
+
+    add(frame) fuses a CameraFrame or LaserFrame; observation(rng) snapshots it as a
+    BevObservation (raises InputError while it has no wall cell); plane_pose(frame) is the
+    sensor's (x, y, yaw) in the plane frame.
+    """
+
+    def __init__(self, settings: Settings | None = None):
+        self.settings = settings or Settings()
+        b, f = self.settings.bev, self.settings.frontend
+        if b.resolution <= 0 or b.window_radius <= 0 or b.recenter_distance < 0:
+            raise ConfigError("bev: resolution and window_radius must be > 0, recenter_distance >= 0")
+        if f.pixel_stride < 1 or f.max_depth <= 0:
+            raise ConfigError("frontend: pixel_stride must be >= 1 and max_depth > 0")
+        if b.azimuth_bin_deg <= 0 or b.trajectory_length < 1:
+            raise ConfigError("bev: azimuth_bin_deg must be > 0 and trajectory_length >= 1")
+        half = int(np.ceil((b.window_radius + b.recenter_distance) / b.resolution))
+        self.grid = _ScrollingGrid(2 * half, b.resolution)
+        self._slack = int(np.floor(b.recenter_distance / b.resolution))
+        self.gravity = GravityEstimator(f.gravity, make_rng(self.settings.seed, "gravity"))
+        self._pending: deque[CameraFrame] = deque()
+        self._trajectory = np.zeros((b.trajectory_length, 3))  # ring buffer: fixed memory
+        self._trajectory_count = 0
+        self._ray_cache: dict = {}
+        self.frames_added = 0
+        self.frames_fused = 0
+        self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
+
+    # ------------------------------------------------------------------------------
+    # public API
+    def add(self, frame: CameraFrame | LaserFrame) -> None:
+        if isinstance(frame, LaserFrame):
+            self._add_laser(frame)
+        elif isinstance(frame, CameraFrame):
+            self._add_camera(frame)
+        else:
+            raise FrameError(f"RollingBEV.add expects a CameraFrame or LaserFrame, got {type(frame).__name__}")
+        self.frames_added += 1
+
+    def plane_pose(self, frame: CameraFrame | LaserFrame) -> tuple[float, float, float]:
+        """(x, y, yaw) of the frame's sensor in the plane frame (camera: optical axis yaw;
+        laser: x axis yaw). Before gravity is frozen, a provisional gravity is used."""
+        if isinstance(frame, LaserFrame):
+            return plane_pose(frame.T_odom_sensor, np.eye(3), "x")
+        if isinstance(frame, CameraFrame):
+            return plane_pose(frame.T_odom_cam, self.gravity.provisional_R(), "z")
+        raise FrameError(f"plane_pose expects a CameraFrame or LaserFrame, got {type(frame).__name__}")
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        """(K, 3) plane poses of the last fused frames, oldest first."""
+        n = len(self._trajectory)
+        k = self._trajectory_count
+        if k <= n:
+            return self._trajectory[:k].copy()
+        return np.roll(self._trajectory, -(k % n), axis=0)
+
+    def _record_pose(self, pose) -> None:
+        self._trajectory[self._trajectory_count % len(self._trajectory)] = pose
+        self._trajectory_count += 1
+
+    @property
+    def pending_frames(self) -> int:
+        return len(self._pending)
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the grid, buffers and trajectory (for the flat-memory check)."""
+        pending = sum(f.depth.nbytes + (0 if f.labels is None else f.labels.nbytes) for f in self._pending)
+        rays = sum(r.nbytes for r in self._ray_cache.values())
+        return self.grid.logodds.nbytes + self.grid.wall.nbytes + pending + rays + self._trajectory.nbytes + self.gravity._points.nbytes
+
+    def observation(self, rng: np.random.Generator) -> BevObservation:
+        b = self.settings.bev
+        g = self.grid
+        if g.ix0 is None:
+            raise InputError("BEV is empty: no frame fused yet")
+        wall = (g.wall >= b.wall_min_observations) & (g.logodds > b.occupied_threshold)
+        if not wall.any():
+            raise InputError("BEV has no wall points yet")
+        known = (g.logodds != 0) | (g.wall > 0)
+        rows, cols = np.nonzero(known.any(axis=1))[0], np.nonzero(known.any(axis=0))[0]
+        m = int(np.ceil(b.crop_margin / b.resolution))
+        r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, g.n)
+        c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, g.n)
+        lo = g.logodds[r0:r1, c0:c1]
+        wall = wall[r0:r1, c0:c1]
+        free = lo < b.free_threshold
+        occupied = (lo > b.occupied_threshold) | wall
+        clearance = distance_transform_edt(~occupied) * b.resolution
+        clearance = np.where(free, clearance, 0.0)
+        origin = np.array([(g.ix0 + c0) * b.resolution, (g.iy0 + r0) * b.resolution])
+        wr, wc = np.nonzero(wall)
+        points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
+        lines, circles = _extract_primitives(points, self.settings, rng)
+        return BevObservation(
+            wall_points=points,
+            origin=origin,
+            resolution=b.resolution,
+            free=free,
+            clearance=clearance,
+            lines=lines,
+            circles=circles,
+            trajectory=self.trajectory,
+        )
+
+    # ------------------------------------------------------------------------------
+    # lasers
+    def _add_laser(self, frame: LaserFrame) -> None:
+        x, y, yaw = plane_pose(frame.T_odom_sensor, np.eye(3), "x")
+        T = frame.T_odom_sensor
+        valid = frame.valid
+        a, r = frame.angles, frame.ranges
+        local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+        hits = (local[valid] @ T[:3, :3].T + T[:3, 3])[:, :2]
+        # free polygon: one vertex per beam, stopping short of the hit; no-returns give none
+        free_r = np.where(valid, np.maximum(r - self.settings.bev.free_margin, 0.0), 0.0)
+        world_a = np.arctan2(T[1, 0], T[0, 0]) + a
+        order = np.argsort(world_a) if frame.angle_increment < 0 else slice(None)
+        self._fuse(np.array([x, y]), world_a[order], free_r[order], hits, hits)
+        self._record_pose((x, y, yaw))
+        self.frames_fused += 1
+
+    # ------------------------------------------------------------------------------
+    # cameras
+    def _add_camera(self, frame: CameraFrame) -> None:
+        if self.gravity.ready:
+            self._fuse_camera(frame)
+            return
+        self._feed_gravity(frame)
+        self._pending.append(frame)
+        if self.gravity.ready:
+            while self._pending:
+                self._fuse_camera(self._pending.popleft())
+        elif len(self._pending) > self.settings.frontend.gravity.max_pending_frames:
+            self._pending.popleft()
+            self.frames_dropped += 1
+
+    def _strided(self, frame: CameraFrame):
+        """Every stride-th pixel: depth, labels, K of that sub-image, unit-depth rays."""
+        s = self.settings.frontend.pixel_stride
+        o = s // 2
+        depth = frame.depth[o::s, o::s]
+        labels = None if frame.labels is None else frame.labels[o::s, o::s]
+        K = frame.K.copy()
+        K[0, :] /= s
+        K[1, :] /= s
+        K[0, 2] -= o / s
+        K[1, 2] -= o / s
+        key = (depth.shape, K.tobytes())
+        rays = self._ray_cache.get(key)
+        if rays is None:
+            if len(self._ray_cache) > 4:  # bounded: intrinsics rarely change
+                self._ray_cache.clear()
+            v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]]
+            pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
+            rays = (np.linalg.inv(K) @ pix).T.reshape(depth.shape + (3,))
+            self._ray_cache[key] = rays
+        valid = np.isfinite(depth) & (depth > 0) & (depth <= self.settings.frontend.max_depth)
+        return depth, labels, K, rays, valid
+
+    def _points_odom(self, frame: CameraFrame, depth, rays) -> np.ndarray:
+        T = frame.T_odom_cam
+        cam = rays * np.nan_to_num(depth)[..., None]
+        return cam @ T[:3, :3].T + T[:3, 3]
+
+    def _feed_gravity(self, frame: CameraFrame) -> None:
+        depth, labels, K, rays, valid = self._strided(frame)
+        pts = self._points_odom(frame, depth, rays)
+        if labels is not None:
+            floor = valid & (labels == FLOOR)
+        else:  # no labels: floor candidates from depth normals and the camera's own up axis
+            cam = rays * np.nan_to_num(depth)[..., None]
+            floor = valid & bootstrap_floor_mask(cam, self.settings.frontend.labeller)
+        self.gravity.add_floor_points(pts[floor], frame.T_odom_cam[:3, 3])
+
+    def _fuse_camera(self, frame: CameraFrame) -> None:
+        f = self.settings.frontend
+        grav = self.gravity
+        depth, labels, K, rays, valid = self._strided(frame)
+        R_plane = grav.R_plane_odom
+        pts = self._points_odom(frame, depth, rays) @ R_plane.T  # plane frame
+        height = pts[..., 2] - grav.floor_height
+        if labels is None:
+            normals = depth_normals(pts, depth, valid, f.labeller.normal_step)
+            labels = label_frame(height, normals, valid, f.labeller)
+        labels = np.where(valid, labels, 0).astype(np.uint8)
+        floor = valid & (labels == FLOOR)
+        if floor.any():  # track slow vertical drift of the odometry
+            grav.observe_floor_heights(pts[floor][:, 2])
+            height = pts[..., 2] - grav.floor_height
+        R_up_cam = upright_rotation(frame.T_odom_cam[:3, :3], -grav.up_odom)
+        wall = refine_wall_mask(np.where(valid, depth, 0), labels, K, R_up_cam, f.wall_mask)
+        band = (height >= f.min_obstacle_height) & (height <= f.max_obstacle_height)
+        obstacle = valid & band & (labels != FLOOR) & (labels != CEILING)
+        wall_pts = wall & valid & (height >= f.min_obstacle_height)
+        sensor = plane_pose(frame.T_odom_cam, R_plane, "z")
+        # free space: rays to floor points end there, rays to walls stop free_margin short
+        ray_end = valid & ((labels == FLOOR) | (labels == WALL))
+        xy = pts[..., :2]
+        angles, ranges = self._azimuth_bins(np.array(sensor[:2]), sensor[2], xy[ray_end], labels[ray_end] == WALL)
+        hits = np.concatenate([xy[obstacle], xy[wall_pts]])
+        self._fuse(np.array(sensor[:2]), angles, ranges, hits, xy[wall_pts])
+        self._record_pose(sensor)
+        self.frames_fused += 1
+
+    def _azimuth_bins(self, centre, yaw, xy, is_wall):
+        """One ray per azimuth bin: the farthest free range among the bin's points."""
+        if len(xy) == 0:
+            return np.zeros(0), np.zeros(0)
+        rel = xy - centre
+        rng_ = np.hypot(rel[:, 0], rel[:, 1])
+        rng_ = np.where(is_wall, np.maximum(rng_ - self.settings.bev.free_margin, 0.0), rng_)
+        ang = np.angle(np.exp(1j * (np.arctan2(rel[:, 1], rel[:, 0]) - yaw)))  # relative to heading
+        width = np.deg2rad(self.settings.bev.azimuth_bin_deg)
+        b = np.floor(ang / width).astype(np.int64)
+        b0 = b.min()
+        free = np.zeros(b.max() - b0 + 1)
+        np.maximum.at(free, b - b0, rng_)
+        angles = yaw + (np.arange(len(free)) + b0 + 0.5) * width
+        return angles, free
+
+    # ------------------------------------------------------------------------------
+    # the shared update
+    def _fuse(self, centre: np.ndarray, angles: np.ndarray, free_ranges: np.ndarray, hits: np.ndarray, wall_hits: np.ndarray) -> None:
+        b = self.settings.bev
+        g = self.grid
+        g.centre_on(centre, self._slack)
+        hit_flat = g.unique_flat(hits)
+        # free polygon, drawn on a crop around it only
+        if len(angles) and free_ranges.max() > 0:
+            ends = centre + free_ranges[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+            poly = np.concatenate([centre[None], ends]) / b.resolution - [g.ix0, g.iy0]  # cell units
+            lo_c = np.clip(np.floor(poly.min(axis=0)).astype(int) - 1, 0, g.n)
+            hi_c = np.clip(np.ceil(poly.max(axis=0)).astype(int) + 2, 0, g.n)
+            if (hi_c > lo_c).all():
+                mask = np.zeros((hi_c[1] - lo_c[1], hi_c[0] - lo_c[0]), dtype=np.uint8)
+                # cv2 pixel (c, r) is the centre of cell (r, c), which sits at +0.5 in cell units
+                pts = np.round((poly - lo_c - 0.5) * (1 << _SHIFT)).astype(np.int32)
+                cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=_SHIFT)
+                region = g.logodds[lo_c[1] : hi_c[1], lo_c[0] : hi_c[0]]
+                hr, hc = np.divmod(hit_flat, g.n)
+                inside = (hr >= lo_c[1]) & (hr < hi_c[1]) & (hc >= lo_c[0]) & (hc < hi_c[0])
+                mask[hr[inside] - lo_c[1], hc[inside] - lo_c[0]] = 0  # a frame never frees its own hits
+                free = mask.astype(bool)
+                region[free] = np.maximum(region[free] + b.logodds_free, b.logodds_min)
+        flat_lo = g.logodds.reshape(-1)
+        flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
+        wall_flat = g.unique_flat(wall_hits)
+        flat_wall = g.wall.reshape(-1)
+        flat_wall[wall_flat] = np.minimum(flat_wall[wall_flat].astype(np.int64) + 1, np.iinfo(np.uint16).max)
+
+
+def _extract_primitives(points: np.ndarray, settings: Settings, rng: np.random.Generator):
+    try:
+        from ..primitives import extract_circles, extract_lines
+    except ImportError:  # primitives module not available: alignment has no primitives
+        return LineSet.empty(), CircleSet.empty()
+    lines = extract_lines(points, settings.primitives.lines, rng)
+    circles = extract_circles(points, settings.primitives.circles, rng)
+    return lines, circles

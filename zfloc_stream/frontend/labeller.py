@@ -1,0 +1,82 @@
+"""Geometric labeller for frames that come without labels (no network: numpy only).
+
+Works on an organised point cloud (the strided depth image back-projected) in the
+gravity-aligned plane frame, with the floor height known:
+  floor   - within floor_tolerance of the floor height, surface horizontal (or normal unknown)
+  ceiling - horizontal surface higher than ceiling_min_height above the floor
+  wall    - vertical surface higher than wall_min_height above the floor
+  other   - every other valid point (furniture tops, clutter, slanted surfaces)
+Walls found this way still go through the wall-mask refinement, which removes most
+furniture sides that pass the "vertical" test.
+
+Before gravity is known there is no height: `bootstrap_floor_mask` proposes floor
+candidates in the camera frame (surfaces facing the camera's up axis within max_tilt_deg,
+well below the camera) for the gravity plane fit, whose RANSAC rejects table tops.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import LabellerSettings
+from ..frames import CEILING, FLOOR, OTHER, WALL
+
+# a neighbour farther than this fraction of the depth is across a depth edge: no normal there
+_MAX_EDGE_RATIO = 0.25
+
+
+def depth_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
+    """Unit normals (H, W, 3) of an organised point cloud (any frame) from central
+    differences over `step` pixels; NaN where a neighbour is missing or lies across a depth
+    edge (farther than a fraction of the depth). The sign is arbitrary: callers use |n_z|."""
+    p = np.asarray(points, dtype=float)
+    h, w, _ = p.shape
+    s = max(int(step), 1)
+    out = np.full((h, w, 3), np.nan)
+    if h <= 2 * s or w <= 2 * s:
+        return out
+    du = p[s:-s, 2 * s :] - p[s:-s, : -2 * s]
+    dv = p[2 * s :, s:-s] - p[: -2 * s, s:-s]
+    n = np.cross(du, dv)
+    norm = np.linalg.norm(n, axis=2)
+    scale = np.nan_to_num(np.asarray(depth, dtype=float)[s:-s, s:-s])
+    ok = (
+        valid[s:-s, s:-s]
+        & valid[s:-s, 2 * s :]
+        & valid[s:-s, : -2 * s]
+        & valid[2 * s :, s:-s]
+        & valid[: -2 * s, s:-s]
+        & (norm > 1e-12)
+    )
+    edge = _MAX_EDGE_RATIO * 2 * np.maximum(scale, 1e-6)
+    ok &= (np.linalg.norm(du, axis=2) < edge) & (np.linalg.norm(dv, axis=2) < edge)
+    inner = np.full((h - 2 * s, w - 2 * s, 3), np.nan)
+    inner[ok] = n[ok] / norm[ok, None]
+    out[s:-s, s:-s] = inner
+    return out
+
+
+def label_frame(height: np.ndarray, normals: np.ndarray, valid: np.ndarray, settings: LabellerSettings) -> np.ndarray:
+    """Labels (H, W) uint8 from heights above the floor and plane-frame normals."""
+    nz = np.abs(normals[..., 2])
+    has_normal = np.isfinite(nz)
+    nz = np.nan_to_num(nz, nan=0.5)
+    horizontal = has_normal & (nz > settings.horizontal_normal_min_z)
+    vertical = has_normal & (nz < settings.vertical_normal_max_z)
+    labels = np.where(valid, OTHER, 0).astype(np.uint8)
+    labels[valid & vertical & (height > settings.wall_min_height)] = WALL
+    labels[valid & horizontal & (height > settings.ceiling_min_height)] = CEILING
+    labels[valid & (horizontal | ~has_normal) & (np.abs(height) < settings.floor_tolerance)] = FLOOR
+    return labels
+
+
+def bootstrap_floor_mask(points_cam: np.ndarray, settings: LabellerSettings) -> np.ndarray:
+    """Floor candidates (H, W) bool before gravity is known, from camera-frame points:
+    surface normal within max_tilt_deg of the camera's up axis (-y) and at least
+    bootstrap_min_below below the camera (along its down axis +y)."""
+    p = np.asarray(points_cam, dtype=float)
+    valid = p[..., 2] > 0
+    n = depth_normals(p, p[..., 2], valid, settings.normal_step)
+    up = np.array([0.0, -1.0, 0.0])
+    facing = np.abs(np.nan_to_num(n) @ up)  # the floor faces the camera, so |n . up| suffices
+    return valid & (facing > np.cos(np.deg2rad(settings.max_tilt_deg))) & (p[..., 1] > settings.bootstrap_min_below)
