@@ -271,8 +271,9 @@ class MappingSettings(Section):
     resolution: float = 0.05  # m per cell
     logodds_hit: float = 0.85  # added to a cell holding a beam end (once per scan)
     logodds_free: float = -0.4  # added to a cell crossed by a beam (once per scan)
-    occupied_threshold: float = 1.0  # log-odds above this: wall
+    occupied_threshold: float = 0.0  # log-odds above this: wall (more hit evidence than free)
     free_range: float = 15.0  # m, beams (and no-returns) clear free space up to this range
+    free_margin: float = 0.1  # m, a beam clears free space only up to this short of its return
     padding: float = 1.0  # m of unknown margin around the mapped area
 
 

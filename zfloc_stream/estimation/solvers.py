@@ -1,0 +1,318 @@
+"""Minimal solvers for the Sim(2) alignment x' = s R x + t (BEV -> floorplan), paper 3.2.
+
+Every solver is a plain function from a BATCH of minimal samples (arrays with a leading
+axis B) to a batch of models: an (M, 4) array of rows (tx, ty, theta, s) and an (M,) array
+naming the sample each model came from. A sample may give zero, one or two models.
+Degenerate samples (parallel lines, coincident centres, a centre on its line, a scale that
+is non-positive, non-finite or outside [min_scale, max_scale]) give no model: never an
+exception, never a NaN.
+
+Lines are in normal form n.x + d = 0. Under the transform a BEV line (n, d) becomes
+(R n, s d - (R n).t); a floorplan line (m, e) matches it up to the sign of its normal, so
+with sigma = sign((R n).m) and u = sigma m (~ R n) every correspondence gives
+    u.t = s d - sigma e.
+Rotation comes from the first (anchor) line pair: R n_1 = m_1 or R n_1 = -m_1. For the
+free-scale solvers the second candidate gives exactly the first transform with s and R
+negated (the linear systems are odd in R), i.e. one of the two always has s < 0; solving
+once and flipping (theta + pi, -s) when s < 0 is therefore the same as trying both and
+discarding the negative one. With a known scale (2L, fixed mode) both candidates are
+genuinely different transforms and both are returned.
+
+Scale modes ("free" | "prior" | "fixed"):
+  free   3L, 2C, LC estimate s (2L needs a prior: it is not used in this mode).
+  prior  as free, plus 2L with s = prior + GGD noise.
+  fixed  s = 1 exactly: 3L and 2L both reduce to one rigid two-line solver (the third
+         line is not needed), 2C to a rigid two-point fit, LC to rotation from the line
+         and translation from the centre. The scale the sample implies (distance ratio for
+         2C, offset ratio for LC) must still be positive and inside [min_scale, max_scale],
+         which rejects samples that cannot be metric-consistent.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from ..config import ScaleMode, SolverSettings
+
+MODEL_COLUMNS = ("tx", "ty", "theta", "s")
+
+
+def _quiet(solver):
+    """Non-finite or degenerate inputs are filtered by masks, never by warnings: silence
+    numpy's floating-point warnings inside a solver (the final finiteness mask is what
+    guarantees no NaN model escapes)."""
+
+    @functools.wraps(solver)
+    def wrapped(*args, **kwargs):
+        with np.errstate(all="ignore"):
+            return solver(*args, **kwargs)
+
+    return wrapped
+
+
+def _empty() -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+
+
+def _angle(v: np.ndarray) -> np.ndarray:
+    return np.arctan2(v[..., 1], v[..., 0])
+
+
+def _rotate(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate (..., 2) vectors by per-row angles theta (broadcast over trailing axes)."""
+    c, s = np.cos(theta), np.sin(theta)
+    while c.ndim < v.ndim - 1:
+        c, s = c[..., None], s[..., None]
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _wrap(theta: np.ndarray) -> np.ndarray:
+    return (theta + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _pack(tx, ty, theta, s, keep, source) -> tuple[np.ndarray, np.ndarray]:
+    models = np.stack([tx, ty, _wrap(theta), s], axis=-1)
+    keep = keep & np.isfinite(models).all(axis=-1)
+    return models[keep], source[keep]
+
+
+def _scale_ok(s: np.ndarray, settings: SolverSettings) -> np.ndarray:
+    return np.isfinite(s) & (s >= settings.min_scale) & (s <= settings.max_scale)
+
+
+def _parallel(a: np.ndarray, b: np.ndarray, settings: SolverSettings) -> np.ndarray:
+    """Unit normals a, b (..., 2) are parallel (either sign) within parallel_angle_deg."""
+    return np.abs(_cross(a, b)) < np.sin(np.deg2rad(settings.parallel_angle_deg))
+
+
+def _as(x, shape_tail: tuple[int, ...]) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    return a.reshape((-1, *shape_tail))
+
+
+# --------------------------------------------------------------------------------------
+# scale prior noise (2L)
+# --------------------------------------------------------------------------------------
+
+
+def scale_prior_sigma(scale_prior: float, settings: SolverSettings) -> float:
+    """sigma of the GGD(0, sigma, beta) with P(|eps| <= window * prior) = prob.
+
+    For a generalised Gaussian, |eps / sigma|^beta ~ Gamma(1 / beta), so
+    P(|eps| <= a) = P(Gamma(1/beta) <= (a / sigma)^beta) and
+    sigma = a / gammaincinv(1/beta, prob)^(1/beta).
+    """
+    beta = settings.scale_prior_ggd_shape
+    a = settings.scale_prior_window * scale_prior
+    return float(a / gammaincinv(1.0 / beta, settings.scale_prior_prob) ** (1.0 / beta))
+
+
+def sample_scale_noise(n: int, scale_prior: float, settings: SolverSettings, rng: np.random.Generator) -> np.ndarray:
+    """n draws of eps ~ GGD(0, sigma, beta) from the given generator."""
+    beta = settings.scale_prior_ggd_shape
+    sigma = scale_prior_sigma(scale_prior, settings)
+    magnitude = rng.gamma(1.0 / beta, 1.0, size=n) ** (1.0 / beta)
+    sign = np.where(rng.random(n) < 0.5, -1.0, 1.0)
+    return sigma * sign * magnitude
+
+
+# --------------------------------------------------------------------------------------
+# line solvers
+# --------------------------------------------------------------------------------------
+
+
+def _anchor_rotation(n: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """theta with R n_1 = m_1 (the first of the two candidates)."""
+    return _angle(m[:, 0]) - _angle(n[:, 0])
+
+
+def _signed_fp(theta, n, m, e):
+    """u_i = sigma_i m_i ~ R n_i, sigma_i e_i and |cos| between R n_i and m_i."""
+    rn = _rotate(theta, n)
+    cos = np.einsum("bij,bij->bi", rn, m)
+    sigma = np.where(cos < 0, -1.0, 1.0)
+    return sigma[..., None] * m, sigma * e, np.abs(cos)
+
+
+@_quiet
+def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverSettings = SolverSettings(), scale_mode: ScaleMode = "free"):
+    """Three line correspondences -> models. Arrays: normals (B, 3, 2), offsets (B, 3);
+    line 0 is the anchor fixing the rotation. Normal consistency |(R n_i).m_i| > tau_p is
+    checked for lines 1, 2 before the 3x3 system is solved. In fixed mode the third line
+    is ignored (rigid two-line solver)."""
+    n, d = _as(bev_normals, (3, 2)), _as(bev_offsets, (3,))
+    m, e = _as(fp_normals, (3, 2)), _as(fp_offsets, (3,))
+    if scale_mode == "fixed":
+        return _solve_two_lines(n[:, :2], d[:, :2], m[:, :2], e[:, :2], np.ones(len(n)), settings)
+    B = len(n)
+    if B == 0:
+        return _empty()
+    source = np.arange(B)
+    all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
+    theta = _anchor_rotation(n, m)
+    u, se, cos = _signed_fp(theta, n, m, e)
+    ok = ~all_parallel & (cos[:, 1:] > settings.normal_consistency).all(axis=1)
+    if not ok.any():
+        return _empty()
+    theta, u, se, d, source = theta[ok], u[ok], se[ok], d[ok], source[ok]
+    # rows: s d_i - u_i.t = sigma_i e_i  ->  A [s, tx, ty]^T = b
+    A = np.concatenate([d[..., None], -u], axis=2)
+    b = se
+    det = np.linalg.det(A)
+    scale_of_rows = np.prod(np.linalg.norm(A, axis=2), axis=1)
+    regular = np.abs(det) > settings.singular_tolerance * np.maximum(scale_of_rows, 1e-300)
+    sol = np.zeros((len(A), 3))
+    if regular.any():
+        sol[regular] = np.linalg.solve(A[regular], b[regular][..., None])[..., 0]
+    s, tx, ty = sol[:, 0], sol[:, 1], sol[:, 2]
+    flip = s < 0  # the R n_1 = -m_1 candidate: same t, theta + pi, -s
+    theta = np.where(flip, theta + np.pi, theta)
+    s = np.abs(s)
+    return _pack(tx, ty, theta, s, regular & _scale_ok(s, settings), source)
+
+
+def _solve_two_lines(n, d, m, e, s, settings: SolverSettings, skip_scale_check: bool = False):
+    """Two line correspondences with known scales s (B,): both rotation candidates."""
+    B = len(n)
+    if B == 0:
+        return _empty()
+    source = np.arange(B)
+    ok = ~_parallel(n[:, 0], n[:, 1], settings)
+    if not skip_scale_check:
+        ok &= _scale_ok(s, settings)
+    out_models, out_source = [], []
+    theta0 = _anchor_rotation(n, m)
+    for flip in (0.0, np.pi):
+        theta = theta0 + flip
+        u, se, cos = _signed_fp(theta, n, m, e)
+        keep = ok & (cos[:, 1] > settings.normal_consistency)
+        # u_i.t = s d_i - sigma_i e_i, a 2x2 system solved by Cramer's rule
+        rhs = s[:, None] * d - se
+        det = _cross(u[:, 0], u[:, 1])
+        keep &= ~_parallel(u[:, 0], u[:, 1], settings)
+        safe = np.where(keep, det, 1.0)
+        tx = (rhs[:, 0] * u[:, 1, 1] - rhs[:, 1] * u[:, 0, 1]) / safe
+        ty = (u[:, 0, 0] * rhs[:, 1] - u[:, 1, 0] * rhs[:, 0]) / safe
+        mod, src = _pack(tx, ty, theta, s, keep, source)
+        out_models.append(mod)
+        out_source.append(src)
+    return _merge_by_source(out_models, out_source)
+
+
+def _merge_by_source(models: list[np.ndarray], sources: list[np.ndarray]):
+    """Concatenate candidate batches, ordered by sample (stable), so output is deterministic."""
+    mod = np.concatenate(models)
+    src = np.concatenate(sources)
+    order = np.argsort(src, kind="stable")
+    return mod[order], src[order]
+
+
+@_quiet
+def solve_2l(
+    bev_normals,
+    bev_offsets,
+    fp_normals,
+    fp_offsets,
+    scale_prior: float,
+    rng: np.random.Generator | None,
+    settings: SolverSettings = SolverSettings(),
+    scale_mode: ScaleMode = "prior",
+):
+    """Two line correspondences with a metric scale prior: s = prior + eps,
+    eps ~ GGD(0, sigma, shape) (one draw per sample, shared by both rotation candidates).
+    In fixed mode s = 1 exactly and rng is not used. normals (B, 2, 2), offsets (B, 2)."""
+    n, d = _as(bev_normals, (2, 2)), _as(bev_offsets, (2,))
+    m, e = _as(fp_normals, (2, 2)), _as(fp_offsets, (2,))
+    B = len(n)
+    if scale_mode == "fixed":
+        return _solve_two_lines(n, d, m, e, np.ones(B), settings, skip_scale_check=True)
+    if rng is None:
+        raise ValueError("solve_2l needs a Generator for the scale noise")  # programming error
+    if not (np.isfinite(scale_prior) and scale_prior > 0):
+        return _empty()
+    s = scale_prior + sample_scale_noise(B, scale_prior, settings, rng)
+    return _solve_two_lines(n, d, m, e, s, settings)
+
+
+# --------------------------------------------------------------------------------------
+# circle solvers
+# --------------------------------------------------------------------------------------
+
+
+def _radius_ok(r_bev, r_fp, s, settings: SolverSettings) -> np.ndarray:
+    if r_bev is None or r_fp is None:
+        return np.ones(np.shape(s), dtype=bool)
+    ratio = np.asarray(r_fp, dtype=float) / (s * np.asarray(r_bev, dtype=float))
+    tol = 1.0 + settings.radius_tolerance
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.isfinite(ratio) & (ratio <= tol) & (ratio * tol >= 1.0)
+
+
+@_quiet
+def solve_2c(
+    bev_centers,
+    fp_centers,
+    settings: SolverSettings = SolverSettings(),
+    scale_mode: ScaleMode = "free",
+    bev_radii=None,
+    fp_radii=None,
+):
+    """Two circle-centre correspondences -> models. centers (B, 2, 2); optional radii
+    (B, 2) prune pairs whose radius ratio disagrees with the scale."""
+    c, cp = _as(bev_centers, (2, 2)), _as(fp_centers, (2, 2))
+    B = len(c)
+    if B == 0:
+        return _empty()
+    v, vp = c[:, 1] - c[:, 0], cp[:, 1] - cp[:, 0]
+    lv, lvp = np.linalg.norm(v, axis=1), np.linalg.norm(vp, axis=1)
+    ok = (lv >= settings.min_baseline) & (lvp > 0)
+    implied = lvp / np.where(ok, lv, 1.0)
+    ok &= _scale_ok(implied, settings)
+    s = np.ones(B) if scale_mode == "fixed" else implied
+    theta = _angle(vp) - _angle(v)
+    # centroid alignment: exact for noise-free data, least squares for noisy pairs
+    t = cp.mean(axis=1) - s[:, None] * _rotate(theta, c.mean(axis=1))
+    ok &= _radius_ok(None if bev_radii is None else _as(bev_radii, (2,)), None if fp_radii is None else _as(fp_radii, (2,)), s[:, None], settings).all(axis=1)
+    return _pack(t[:, 0], t[:, 1], theta, s, ok, np.arange(B))
+
+
+@_quiet
+def solve_lc(
+    bev_normal,
+    bev_offset,
+    bev_center,
+    fp_normal,
+    fp_offset,
+    fp_center,
+    settings: SolverSettings = SolverSettings(),
+    scale_mode: ScaleMode = "free",
+    bev_radius=None,
+    fp_radius=None,
+):
+    """One line + one circle-centre correspondence -> models. normal (B, 2), offset (B,),
+    center (B, 2). Rotation from the line; scale from the centre's signed distance to the
+    line, s = (u.c' + sigma e) / (n.c + d); translation t = c' - s R c."""
+    n, d, c = _as(bev_normal, (2,)), _as(bev_offset, ()), _as(bev_center, (2,))
+    m, e, cp = _as(fp_normal, (2,)), _as(fp_offset, ()), _as(fp_center, (2,))
+    B = len(n)
+    if B == 0:
+        return _empty()
+    theta = _angle(m) - _angle(n)  # R n = m (first candidate)
+    lever = np.einsum("ij,ij->i", n, c) + d  # signed distance of the BEV centre to its line
+    ok = np.abs(lever) >= settings.min_baseline
+    implied = (np.einsum("ij,ij->i", m, cp) + e) / np.where(ok, lever, 1.0)
+    flip = implied < 0  # the other candidate (R n = -m) makes the scale positive
+    theta = np.where(flip, theta + np.pi, theta)
+    implied = np.abs(implied)
+    ok &= _scale_ok(implied, settings)
+    s = np.ones(B) if scale_mode == "fixed" else implied
+    t = cp - s[:, None] * _rotate(theta, c)
+    ok &= _radius_ok(bev_radius, fp_radius, s, settings)
+    return _pack(t[:, 0], t[:, 1], theta, s, ok, np.arange(B))
