@@ -19,7 +19,7 @@ import numpy as np
 
 from .config import Settings
 from .errors import ZflocError
-from .estimate import Alternative, Estimate
+from .estimate import Estimate
 from .estimation import localize
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
@@ -37,6 +37,7 @@ class Localizer:
         self.frames_pushed = 0
         self.frames_fused = 0
         self.last_result = None  # LocalizationResult of the latest round, for logging
+        self.last_observation = None  # BevObservation of the latest round, for overlays
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -69,6 +70,7 @@ class Localizer:
         timings["primitives"] = time.perf_counter() - t0
         if obs is None or not self._enough_evidence(obs):
             return False
+        self.last_observation = obs
         tracked = self.tracker.confidently_tracking
         iterations = cfg.estimator.ransac.tracking_iterations if tracked else cfg.estimator.ransac.iterations
         try:
@@ -106,10 +108,5 @@ class Localizer:
             pose = np.array(alignment.apply_pose(*plane_pose))
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
-        alternatives = ()
-        if plane_pose is not None:
-            alternatives = tuple(
-                Alternative(m.alignment, np.array(m.alignment.apply_pose(*plane_pose)), float(m.weight), float(m.score))
-                for m in self.tracker.modes
-            )
+        alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
         return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped)

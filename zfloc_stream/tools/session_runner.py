@@ -65,13 +65,13 @@ def run_session(
     truth = None if any(t is None for t in truths) or not truths else np.array(truths, dtype=float)
     outcome = SessionOutcome(estimates, truth, out_dir)
     best = localizer.tracker.best
-    obs_points = localizer.bev.wall_points() if hasattr(localizer.bev, "wall_points") else None
+    obs = localizer.last_observation
     save_overlay(
         out_dir / "overlay.png",
         floorplan,
         outcome.poses,
         truth,
-        bev_wall_points=obs_points,
+        bev_wall_points=None if obs is None else obs.wall_points,
         alignment=None if best is None else best.alignment,
         title=f"{description}: {len(estimates)} frames, final status {estimates[-1].status if estimates else '-'}",
     )
