@@ -1,0 +1,28 @@
+"""Input frames rebuilt from their decoded messages: the one place that does it, used by
+the writer (to hand back the frame as logged) and by the reader (to replay it)."""
+
+from __future__ import annotations
+
+from ..errors import SessionLogError
+from ..frames import CameraFrame, LaserFrame
+from . import schemas as S
+
+
+def camera_frame_from_msgs(depth, labels, calibration, odometry, ground_truth, heading_axis: str, timestamp: float) -> CameraFrame:
+    """depth/labels: RawImage (labels may be None); calibration: CameraCalibration;
+    odometry / ground_truth: PoseInFrame (ground_truth may be None)."""
+    d = S.depth_from_msg(depth)
+    lab = None if labels is None else S.labels_from_msg(labels)
+    K, width, height = S.calibration_from_msg(calibration)
+    if (width, height) != (0, 0) and (height, width) != d.shape:
+        raise SessionLogError(f"calibration is for {width}x{height} images but depth is {d.shape[1]}x{d.shape[0]}")
+    T = S.matrix_from_pose(odometry.pose)
+    gt = None if ground_truth is None else S.planar_pose_from_pose(ground_truth.pose, heading_axis)
+    return CameraFrame(d, lab, K, T, timestamp, ground_truth=gt)
+
+
+def laser_frame_from_msgs(scan, range_min: float, range_max: float, odometry, ground_truth, heading_axis: str, timestamp: float) -> LaserFrame:
+    ranges, angle_min, angle_increment = S.scan_from_msg(scan)
+    T = S.matrix_from_pose(odometry.pose)
+    gt = None if ground_truth is None else S.planar_pose_from_pose(ground_truth.pose, heading_axis)
+    return LaserFrame(ranges, angle_min, angle_increment, range_min, range_max, T, timestamp, ground_truth=gt)

@@ -1,0 +1,474 @@
+"""MCAP sessions as an input source: settings, floorplan, input frames and logged outputs.
+
+    session = read_session("session.mcap")            # or salvage=True for a cut-off file
+    for rec in session.records():                     # FrameRecord: index, frame, outputs
+        est = localizer.push(rec.frame)
+
+Frames are grouped by the timestamp in each message's header (log time where a header
+has none): one /camera/depth (or /scan) message plus the /odometry message of the same
+timestamp make a frame; /camera/labels and /groundtruth/pose of that timestamp are added
+when present; the calibration is the latest one at or before it. A frame is complete once
+every input topic has moved past its timestamp, so only a few frames are ever buffered.
+Files from other tools on the same topics read the same way.
+
+Every fault ends as a SessionLogError naming the file and what is wrong. With
+salvage=True a truncated or damaged file yields what its intact chunks hold, and the
+reasons anything was dropped are listed in `Session.problems`.
+"""
+
+from __future__ import annotations
+
+import io
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from mcap.reader import SeekingReader
+from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap_protobuf.decoder import DecoderFactory
+
+from ..config import Settings, settings_from_dict
+from ..errors import FrameError, SessionLogError, ZflocError
+from ..estimate import Estimate
+from ..frames import CameraFrame, LaserFrame
+from . import schemas as S
+from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
+
+MAGIC = b"\x89MCAP0\r\n"
+EXPECTED_SCHEMAS = {
+    S.TOPIC_DEPTH: "foxglove.RawImage",
+    S.TOPIC_LABELS: "foxglove.RawImage",
+    S.TOPIC_CALIBRATION: "foxglove.CameraCalibration",
+    S.TOPIC_SCAN: "foxglove.LaserScan",
+    S.TOPIC_ODOMETRY: "foxglove.PoseInFrame",
+    S.TOPIC_GROUND_TRUTH: "foxglove.PoseInFrame",
+    S.TOPIC_POSE: "foxglove.PoseInFrame",
+    S.TOPIC_HYPOTHESES: "foxglove.PosesInFrame",
+    S.TOPIC_BEV: "foxglove.Grid",
+    S.TOPIC_STATUS: S.STATUS_SCHEMA_NAME,
+}
+# Topics whose progress decides that a timestamp is complete (calibration is a state:
+# often published once, so it must not hold frames back).
+_PROGRESS_TOPICS = (S.TOPIC_DEPTH, S.TOPIC_SCAN, S.TOPIC_LABELS, S.TOPIC_ODOMETRY, S.TOPIC_GROUND_TRUTH, S.TOPIC_STATUS)
+# A topic that stops early would otherwise hold every later frame in memory.
+_MAX_PENDING_STAMPS = 16
+
+
+@dataclass
+class LoggedOutputs:
+    """What the localizer logged for one frame (None where nothing was logged)."""
+
+    status: dict | None = None  # /zfloc/status JSON
+    pose: object | None = None  # foxglove.PoseInFrame message
+    hypotheses: object | None = None  # foxglove.PosesInFrame message
+    bev: object | None = None  # foxglove.Grid message
+
+    @property
+    def estimate(self) -> Estimate | None:
+        return None if self.status is None else S.estimate_from_status(self.status)
+
+    @property
+    def bev_grid(self) -> S.BevGrid | None:
+        return None if self.bev is None else S.grid_from_msg(self.bev)
+
+
+@dataclass
+class FrameRecord:
+    index: int  # position in the session's frame sequence (0-based)
+    stamp_ns: int
+    frame: CameraFrame | LaserFrame
+    outputs: LoggedOutputs
+
+
+@dataclass
+class _Channel:
+    topic: str
+    decode: object  # bytes -> message
+    metadata: dict
+
+
+class Session:
+    """A session file opened for reading. Iterate `records()` or `frames()` (each call
+    re-reads the file from the start)."""
+
+    def __init__(self, path: Path, salvage: bool, metadata: dict[str, dict[str, str]], attachments: dict[str, bytes], topics: set[str] | None):
+        self.path = path
+        self.salvage = salvage
+        self.metadata = metadata
+        self.attachments = attachments  # name -> bytes
+        self.topics = topics  # from the summary; None when unknown (salvage, no summary)
+        self.problems: list[str] = []  # why anything was dropped while reading
+        self.settings_yaml: str | None = metadata.get(S.METADATA_SETTINGS, {}).get("yaml")
+        self.settings: Settings | None = self._parse_settings()
+        self._floorplan = None
+
+    # --- contents -------------------------------------------------------------------------
+    def _parse_settings(self) -> Settings | None:
+        if self.settings_yaml is None:
+            return None
+        try:
+            data = yaml.safe_load(self.settings_yaml)
+        except yaml.YAMLError:
+            raise SessionLogError(f"{self.path}: logged settings are not valid YAML") from None
+        if not isinstance(data, dict):
+            raise SessionLogError(f"{self.path}: logged settings are not a mapping")
+        try:
+            return settings_from_dict(data, source=f"{self.path} (logged settings)")
+        except ZflocError as err:
+            raise SessionLogError(str(err)) from None
+
+    @property
+    def info(self) -> dict[str, str]:
+        return self.metadata.get(S.METADATA_SESSION, {})
+
+    @property
+    def floorplan_files(self) -> dict[str, bytes]:
+        n = len(S.ATTACHMENT_FLOORPLAN_PREFIX)
+        return {k[n:]: v for k, v in self.attachments.items() if k.startswith(S.ATTACHMENT_FLOORPLAN_PREFIX)}
+
+    @property
+    def floorplan(self):
+        """The embedded floorplan (Floorplan), or None when the file carries none."""
+        if self._floorplan is None and self.floorplan_files:
+            self._floorplan = self._load_floorplan()
+        return self._floorplan
+
+    def _load_floorplan(self):
+        from ..floorplan import Floorplan  # the floorplan stage is only needed here
+
+        files = self.floorplan_files
+        yamls = [n for n in files if n.endswith((".yaml", ".yml"))]
+        if len(yamls) != 1 or any("/" in n or n.startswith(".") for n in files):
+            raise SessionLogError(f"{self.path}: floorplan attachments {sorted(files)} must hold one YAML and plain file names")
+        with tempfile.TemporaryDirectory(prefix="zfloc-session-") as tmp:
+            for name, data in files.items():
+                (Path(tmp) / name).write_bytes(data)
+            try:
+                return Floorplan.load(Path(tmp) / yamls[0])
+            except ZflocError as err:
+                raise SessionLogError(f"{self.path}: embedded floorplan is unusable: {err}") from None
+
+    # --- frames -----------------------------------------------------------------------------
+    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[CameraFrame | LaserFrame]:
+        for rec in self.records(start, stop):
+            yield rec.frame
+
+    def records(self, start: int = 0, stop: int | None = None) -> Iterator[FrameRecord]:
+        """Frames start <= index < stop with their logged outputs, in timestamp order."""
+        self.problems = []
+        grouper = _FrameGrouper(self)
+        index = 0
+        for stamp, parts in grouper.stamps(self._messages()):
+            rec = self._record(index, stamp, parts)
+            if rec is None:
+                continue
+            if index >= start:
+                if stop is not None and index >= stop:
+                    return
+                yield rec
+            index += 1
+
+    def _record(self, index: int, stamp: int, parts: dict) -> FrameRecord | None:
+        outputs = LoggedOutputs(
+            status=parts.get(S.TOPIC_STATUS, (None,))[0],
+            pose=parts.get(S.TOPIC_POSE, (None,))[0],
+            hypotheses=parts.get(S.TOPIC_HYPOTHESES, (None,))[0],
+            bev=parts.get(S.TOPIC_BEV, (None,))[0],
+        )
+        where = f"t={S.ns_to_seconds(stamp):.9f}"
+        has_camera, has_scan = S.TOPIC_DEPTH in parts, S.TOPIC_SCAN in parts
+        if not (has_camera or has_scan):
+            if outputs.status is not None:
+                self.problems.append(f"{where}: outputs without an input frame were dropped")
+            return None
+        if S.TOPIC_ODOMETRY not in parts:
+            self.problems.append(f"{where}: frame dropped: no {S.TOPIC_ODOMETRY} message with the same timestamp")
+            return None
+        odom, odom_meta = parts[S.TOPIC_ODOMETRY]
+        gt, gt_meta = parts.get(S.TOPIC_GROUND_TRUTH, (None, {}))
+        try:
+            if has_camera:
+                calib = parts.get(S.TOPIC_CALIBRATION, (None,))[0]
+                if calib is None:
+                    self.problems.append(f"{where}: frame dropped: no {S.TOPIC_CALIBRATION} at or before it")
+                    return None
+                axis = gt_meta.get(S.HEADING_AXIS_KEY, "z")
+                labels = parts.get(S.TOPIC_LABELS, (None,))[0]
+                frame = camera_frame_from_msgs(parts[S.TOPIC_DEPTH][0], labels, calib, odom, gt, axis, S.ns_to_seconds(stamp))
+            else:
+                scan, meta = parts[S.TOPIC_SCAN]
+                cfg = (self.settings or Settings()).logging
+                rmin = _float_meta(meta, S.RANGE_MIN_KEY, cfg.foreign_scan_range_min, self.path)
+                rmax = _float_meta(meta, S.RANGE_MAX_KEY, cfg.foreign_scan_range_max, self.path)
+                axis = gt_meta.get(S.HEADING_AXIS_KEY, "x")
+                frame = laser_frame_from_msgs(scan, rmin, rmax, odom, gt, axis, S.ns_to_seconds(stamp))
+        except FrameError as err:  # a valid file may hold an unusable frame: skip it, say why
+            self.problems.append(f"{where}: frame dropped: {err}")
+            return None
+        except SessionLogError as err:
+            self._fail(f"frame at {where}: {err}")
+            return None
+        return FrameRecord(index, stamp, frame, outputs)
+
+    # --- records and messages ---------------------------------------------------------------
+    def _fail(self, what: str) -> None:
+        """A fault in the file: raise, or in salvage mode note it and go on."""
+        if not self.salvage:
+            raise SessionLogError(f"{self.path}: {what}")
+        self.problems.append(what)
+
+    def _messages(self) -> Iterator[tuple[str, int, object, dict]]:
+        """(topic, stamp_ns, decoded message, channel metadata) of the session topics."""
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, _Channel | None] = {}
+        factory = DecoderFactory()
+        for record in _records(self.path, self.salvage, self.problems):
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                if record.id not in channels:
+                    channels[record.id] = self._channel(record, schemas, factory)
+            elif isinstance(record, Message):
+                ch = channels.get(record.channel_id)
+                if ch is None:
+                    if record.channel_id not in channels:
+                        self._fail(f"message on unknown channel {record.channel_id}")
+                    continue
+                try:
+                    msg = ch.decode(record.data)
+                    stamp = record.log_time  # JSON status has no header stamp
+                    if ch.topic != S.TOPIC_STATUS and msg.HasField("timestamp") and S.from_stamp(msg.timestamp) > 0:
+                        stamp = S.from_stamp(msg.timestamp)
+                except SessionLogError as err:
+                    self._fail(f"{ch.topic} message at log time {record.log_time}: {err}")
+                    continue
+                except Exception as err:  # noqa: BLE001 - protobuf on damaged bytes
+                    self._fail(f"{ch.topic} message at log time {record.log_time} cannot be decoded ({type(err).__name__})")
+                    continue
+                yield ch.topic, stamp, msg, ch.metadata
+
+    def _channel(self, channel: Channel, schemas: dict, factory: DecoderFactory) -> _Channel | None:
+        """A decoder for a session topic; None for topics this package does not read."""
+        expected = EXPECTED_SCHEMAS.get(channel.topic)
+        if expected is None:
+            return None
+        schema = schemas.get(channel.schema_id)
+        name = None if schema is None else schema.name
+        if name != expected:
+            self._fail(f"topic {channel.topic} has schema {name!r}, expected {expected!r}")
+            return None
+        if channel.topic == S.TOPIC_STATUS:
+            if channel.message_encoding != "json":
+                self._fail(f"topic {channel.topic} has message encoding {channel.message_encoding!r}, expected 'json'")
+                return None
+            return _Channel(channel.topic, S.decode_status, dict(channel.metadata))
+        try:
+            decoder = factory.decoder_for(channel.message_encoding, schema)
+        except Exception as err:  # noqa: BLE001 - a damaged schema record
+            self._fail(f"schema {name} of topic {channel.topic} cannot be loaded ({type(err).__name__}: {err})")
+            return None
+        if decoder is None:
+            self._fail(f"topic {channel.topic} is not protobuf-encoded (message encoding {channel.message_encoding!r})")
+            return None
+        return _Channel(channel.topic, decoder, dict(channel.metadata))
+
+
+def _float_meta(meta: dict, key: str, default: float, path: Path) -> float:
+    if key not in meta:
+        return float(default)
+    try:
+        return float(meta[key])
+    except ValueError:
+        raise SessionLogError(f"{path}: /scan channel metadata {key}={meta[key]!r} is not a number") from None
+
+
+class _FrameGrouper:
+    """Collects messages per timestamp; a timestamp is released once every input topic
+    seen so far has moved past it (or at the end of the file)."""
+
+    def __init__(self, session: Session):
+        self.session = session
+        self.pending: dict[int, dict] = {}
+        self.progress: dict[str, int] = {}
+        self.calibrations: list[tuple[int, object]] = []  # (stamp, message), in file order
+        self.released_up_to = -1
+
+    def stamps(self, messages) -> Iterator[tuple[int, dict]]:
+        for topic, stamp, msg, meta in messages:
+            if topic == S.TOPIC_CALIBRATION:
+                self.calibrations.append((stamp, msg))
+                continue
+            if stamp <= self.released_up_to:
+                self.session.problems.append(f"{topic} message at t={S.ns_to_seconds(stamp):.9f} arrived after its frame and was dropped")
+                continue
+            parts = self.pending.setdefault(stamp, {})
+            if topic in parts:
+                self.session.problems.append(f"duplicate {topic} message at t={S.ns_to_seconds(stamp):.9f} dropped")
+                continue
+            parts[topic] = (msg, meta)
+            if topic in _PROGRESS_TOPICS:
+                self.progress[topic] = max(stamp, self.progress.get(topic, -1))
+            yield from self._release(min(self.progress.values()) if self.progress else -1)
+        yield from self._release(None)
+
+    def _release(self, before: int | None) -> Iterator[tuple[int, dict]]:
+        """Release stamps < before (all when None), oldest first; and the oldest ones
+        beyond the pending bound."""
+        for stamp in sorted(self.pending):
+            if before is not None and stamp >= before and len(self.pending) <= _MAX_PENDING_STAMPS:
+                break
+            parts = self.pending.pop(stamp)
+            self.released_up_to = stamp
+            calib = self._calibration_at(stamp)
+            if calib is not None:
+                parts[S.TOPIC_CALIBRATION] = (calib, {})
+            yield stamp, parts
+
+    def _calibration_at(self, stamp: int):
+        """Latest calibration at or before the stamp (else the first one: published late)."""
+        best = None
+        for s, msg in self.calibrations:
+            if s <= stamp and (best is None or s >= best[0]):
+                best = (s, msg)
+        if best is None:
+            return self.calibrations[0][1] if self.calibrations else None
+        # older calibrations can no longer be the latest for a later stamp
+        self.calibrations = [(s, m) for s, m in self.calibrations if s >= best[0]]
+        return best[1]
+
+
+# --- opening -----------------------------------------------------------------------------------
+def _records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
+    """Records in file order, chunks broken up. Faults raise (or, salvaging, end the scan
+    at a damaged record and skip a damaged chunk)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        reader = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size)
+        records = reader.records
+        while True:
+            offset = f.tell()
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception as err:  # noqa: BLE001 - any parser fault on damaged bytes
+                what = _describe(err, offset, size)
+                if not salvage:
+                    raise SessionLogError(f"{path}: {what}") from None
+                problems.append(f"reading stopped: {what}")
+                return
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except Exception as err:  # noqa: BLE001
+                    what = f"damaged chunk near byte {offset} ({type(err).__name__}: {err})"
+                    if not salvage:
+                        raise SessionLogError(f"{path}: {what}") from None
+                    problems.append(f"chunk skipped: {what}")
+                    continue
+                yield from inner
+            else:
+                yield record
+            if isinstance(record, Footer):
+                return
+
+
+def _describe(err: Exception, offset: int, size: int) -> str:
+    name = type(err).__name__
+    if name == "EndOfFile" or "unpack requires" in str(err):
+        return f"file is truncated (ends inside a record after byte {offset} of {size})"
+    if name == "InvalidMagic":
+        return "not an MCAP file (bad magic bytes)"
+    return f"damaged record near byte {offset} ({name}: {err})"
+
+
+def _check_path(path: Path) -> None:
+    if not path.exists():
+        raise SessionLogError(f"session file not found: {path}")
+    if not path.is_file():
+        raise SessionLogError(f"session path is not a file: {path}")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+    except OSError as err:
+        raise SessionLogError(f"cannot read session file {path}: {err.strerror or err}") from None
+    if head != MAGIC:
+        raise SessionLogError(f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)")
+
+
+def _open_indexed(path: Path) -> tuple[dict, dict, set[str] | None]:
+    """Metadata, attachments and topics of a complete file, through its summary."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(-len(MAGIC), io.SEEK_END)
+            if f.read(len(MAGIC)) != MAGIC:
+                raise SessionLogError(
+                    f"{path}: file is truncated (no MCAP footer at its end; a crashed recording?): "
+                    "read what it holds with --salvage / read_session(..., salvage=True)"
+                )
+            f.seek(0)
+            reader = SeekingReader(f, validate_crcs=True, record_size_limit=path.stat().st_size)
+            summary = reader.get_summary()
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            attachments = {a.name: a.data for a in reader.iter_attachments()}
+    except SessionLogError:
+        raise
+    except Exception as err:  # noqa: BLE001 - damaged footer / summary / index
+        raise SessionLogError(
+            f"{path}: damaged MCAP summary or index ({type(err).__name__}: {err}); try --salvage".replace("\n", " ")
+        ) from None
+    topics = None if summary is None else {c.topic for c in summary.channels.values()}
+    return metadata, attachments, topics
+
+
+def _open_scanning(path: Path, problems: list[str]) -> tuple[dict, dict]:
+    """Metadata and attachments found by a scan of top-level records (salvage)."""
+    metadata: dict = {}
+    attachments: dict = {}
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        records = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except Exception:  # noqa: BLE001 - the frames pass reports where it stops
+                break
+            if isinstance(record, Metadata):
+                metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Attachment):
+                attachments[record.name] = record.data
+            elif isinstance(record, Footer):
+                break
+    return metadata, attachments
+
+
+def _check_topics(path: Path, topics: set[str]) -> None:
+    if S.TOPIC_DEPTH not in topics and S.TOPIC_SCAN not in topics:
+        raise SessionLogError(f"{path}: no input frames: neither {S.TOPIC_DEPTH} nor {S.TOPIC_SCAN} is in the file")
+    if S.TOPIC_ODOMETRY not in topics:
+        raise SessionLogError(f"{path}: topic {S.TOPIC_ODOMETRY} is missing (every frame needs its relative pose)")
+    if S.TOPIC_DEPTH in topics and S.TOPIC_CALIBRATION not in topics:
+        raise SessionLogError(f"{path}: topic {S.TOPIC_CALIBRATION} is missing (depth frames need intrinsics)")
+
+
+def read_session(path: str | Path, salvage: bool = False) -> Session:
+    """Open a session file. Raises SessionLogError when it is missing, not MCAP, truncated
+    (unless salvage), damaged, or lacks the input topics."""
+    path = Path(path)
+    _check_path(path)
+    problems: list[str] = []
+    if salvage:
+        metadata, attachments = _open_scanning(path, problems)
+        topics = None
+    else:
+        metadata, attachments, topics = _open_indexed(path)
+        if topics is not None:
+            _check_topics(path, topics)
+    session = Session(path, salvage, metadata, attachments, topics)
+    session.problems = problems
+    return session

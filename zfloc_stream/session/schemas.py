@@ -1,0 +1,435 @@
+"""Message <-> numpy conversion for the session topics (DESIGN.md table).
+
+Every function here is pure: no file, no clock. Decoders validate what they read and
+raise SessionLogError naming the field that is wrong; the reader adds the file and topic.
+
+Pose conventions (recorded in channel metadata as `heading_axis`, see HEADING_AXIS_KEY):
+- /odometry and /groundtruth/pose hold the *sensor* pose. For a camera that is its OpenCV
+  axes (x right, y down, z forward), so its heading is the optical (z) axis projected on
+  the plane; for a laser the sensor x axis is the heading. Files from other tools follow
+  the same rule (intel-camera-30 does).
+- /zfloc/pose and /zfloc/hypotheses are planar poses: a yaw about z, heading = x axis,
+  so Foxglove draws their arrows along the heading.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.Grid_pb2 import Grid
+from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+from foxglove_schemas_protobuf.Pose_pb2 import Pose
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf.timestamp_pb2 import Timestamp
+
+from ..errors import SessionLogError
+from ..estimate import STATUSES, Alternative, Estimate
+from ..sim2 import Sim2
+
+# --- topics and frame ids (public contract) ---------------------------------------------
+TOPIC_DEPTH = "/camera/depth"
+TOPIC_LABELS = "/camera/labels"
+TOPIC_CALIBRATION = "/camera/calibration"
+TOPIC_SCAN = "/scan"
+TOPIC_ODOMETRY = "/odometry"
+TOPIC_GROUND_TRUTH = "/groundtruth/pose"
+TOPIC_POSE = "/zfloc/pose"
+TOPIC_HYPOTHESES = "/zfloc/hypotheses"
+TOPIC_BEV = "/zfloc/bev"
+TOPIC_STATUS = "/zfloc/status"
+INPUT_TOPICS = (TOPIC_CALIBRATION, TOPIC_DEPTH, TOPIC_LABELS, TOPIC_SCAN, TOPIC_ODOMETRY, TOPIC_GROUND_TRUTH)
+OUTPUT_TOPICS = (TOPIC_POSE, TOPIC_HYPOTHESES, TOPIC_BEV, TOPIC_STATUS)
+
+FRAME_ODOM = "odom"
+FRAME_FLOORPLAN = "floorplan"
+FRAME_CAMERA = "camera"
+FRAME_LASER = "laser"
+
+HEADING_AXIS_KEY = "heading_axis"  # channel metadata: which sensor axis is the heading
+RANGE_MIN_KEY = "range_min"  # /scan channel metadata (foxglove.LaserScan has no such field)
+RANGE_MAX_KEY = "range_max"
+
+# Metadata record names and attachment prefix inside a session file
+METADATA_SETTINGS = "zfloc/settings"  # {"yaml": dump_settings(...)}
+METADATA_SESSION = "zfloc/session"  # {"format": ..., "sensor": ..., user keys}
+ATTACHMENT_FLOORPLAN_PREFIX = "floorplan/"
+SESSION_FORMAT = "zfloc-session/1"
+
+LABEL_ENCODINGS = ("mono8", "8UC1")
+DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
+
+
+# --- time -----------------------------------------------------------------------------------
+def seconds_to_ns(t: float) -> int:
+    if not math.isfinite(t) or t < 0:
+        raise SessionLogError(f"timestamp {t} cannot be logged: MCAP times are finite and non-negative")
+    return int(round(t * 1e9))
+
+
+def ns_to_seconds(ns: int) -> float:
+    """The one ns -> seconds conversion: live runs and replays both see this value."""
+    return ns / 1e9
+
+
+def to_stamp(ns: int) -> Timestamp:
+    return Timestamp(seconds=ns // 1_000_000_000, nanos=ns % 1_000_000_000)
+
+
+def from_stamp(ts: Timestamp) -> int:
+    return int(ts.seconds) * 1_000_000_000 + int(ts.nanos)
+
+
+# --- images ---------------------------------------------------------------------------------
+def depth_to_msg(depth: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> RawImage:
+    """32FC1 little-endian, rows packed (step = 4 * width): lossless."""
+    d = np.ascontiguousarray(depth, dtype="<f4")
+    h, w = d.shape
+    return RawImage(timestamp=to_stamp(ns), frame_id=frame_id, width=w, height=h, encoding="32FC1", step=4 * w, data=d.tobytes())
+
+
+def labels_to_msg(labels: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> RawImage:
+    lab = np.ascontiguousarray(labels, dtype=np.uint8)
+    h, w = lab.shape
+    return RawImage(timestamp=to_stamp(ns), frame_id=frame_id, width=w, height=h, encoding="mono8", step=w, data=lab.tobytes())
+
+
+def _image_rows(msg: RawImage, dtype: str) -> np.ndarray:
+    """HxW array from a RawImage whose rows may be padded (step >= width * bytes)."""
+    item = np.dtype(dtype).itemsize
+    w, h, step = int(msg.width), int(msg.height), int(msg.step)
+    if w <= 0 or h <= 0:
+        raise SessionLogError(f"{msg.encoding} image has size {w}x{h}")
+    if step < w * item:
+        raise SessionLogError(f"{msg.encoding} image step {step} is shorter than a row ({w} x {item} bytes)")
+    if len(msg.data) < step * (h - 1) + w * item:
+        raise SessionLogError(f"{msg.encoding} image data holds {len(msg.data)} bytes, {w}x{h} with step {step} needs more")
+    # a strided view over the (possibly row-padded) buffer, copied into a packed array
+    return np.ndarray((h, w), dtype=dtype, buffer=msg.data, strides=(step, item)).copy()
+
+
+def depth_from_msg(msg: RawImage) -> np.ndarray:
+    """Metres, float32. 32FC1 as is; 16UC1 read as millimetres (0 stays 'no reading')."""
+    if msg.encoding == "32FC1":
+        return _image_rows(msg, "<f4").astype(np.float32)
+    if msg.encoding == "16UC1":
+        return (_image_rows(msg, "<u2").astype(np.float32) / np.float32(1000.0)).astype(np.float32)
+    raise SessionLogError(f"depth encoding '{msg.encoding}' is not supported (expected one of {', '.join(DEPTH_ENCODINGS)})")
+
+
+def labels_from_msg(msg: RawImage) -> np.ndarray:
+    if msg.encoding not in LABEL_ENCODINGS:
+        raise SessionLogError(f"labels encoding '{msg.encoding}' is not supported (expected mono8)")
+    return _image_rows(msg, "u1")
+
+
+# --- calibration ------------------------------------------------------------------------------
+def calibration_to_msg(K: np.ndarray, width: int, height: int, ns: int, frame_id: str = FRAME_CAMERA) -> CameraCalibration:
+    K = np.asarray(K, dtype=float)
+    P = np.zeros((3, 4))
+    P[:, :3] = K
+    return CameraCalibration(
+        timestamp=to_stamp(ns),
+        frame_id=frame_id,
+        width=int(width),
+        height=int(height),
+        distortion_model="plumb_bob",
+        D=[0.0] * 5,
+        K=K.ravel().tolist(),
+        R=np.eye(3).ravel().tolist(),
+        P=P.ravel().tolist(),
+    )
+
+
+def calibration_from_msg(msg: CameraCalibration) -> tuple[np.ndarray, int, int]:
+    """(K 3x3, width, height). Distortion is ignored: depth images are taken as rectified."""
+    if len(msg.K) != 9:
+        raise SessionLogError(f"calibration K has {len(msg.K)} values, expected 9")
+    K = np.array(msg.K, dtype=float).reshape(3, 3)
+    if not np.isfinite(K).all():
+        raise SessionLogError("calibration K contains NaN or inf")
+    return K, int(msg.width), int(msg.height)
+
+
+# --- poses ------------------------------------------------------------------------------------
+def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
+    """(x, y, z, w) with w >= 0, from a rotation matrix (Shepperd's branch choice)."""
+    R = np.asarray(R, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
+def matrix_from_quaternion(q) -> np.ndarray:
+    """Rotation matrix of (x, y, z, w); normalises first (other writers round)."""
+    q = np.asarray(q, dtype=float)
+    n = float(np.linalg.norm(q))
+    if not np.isfinite(q).all() or n < 1e-6:
+        raise SessionLogError(f"orientation quaternion {q.tolist()} is not a rotation (zero or not finite)")
+    x, y, z, w = q / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _pose(position, quaternion) -> Pose:
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in position)
+    (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w) = (float(v) for v in quaternion)
+    return pose
+
+
+def pose_to_msg(T: np.ndarray, ns: int, frame_id: str) -> PoseInFrame:
+    T = np.asarray(T, dtype=float)
+    return PoseInFrame(timestamp=to_stamp(ns), frame_id=frame_id, pose=_pose(T[:3, 3], quaternion_from_matrix(T[:3, :3])))
+
+
+def matrix_from_pose(pose: Pose) -> np.ndarray:
+    p, o = pose.position, pose.orientation
+    T = np.eye(4)
+    T[:3, :3] = matrix_from_quaternion([o.x, o.y, o.z, o.w])
+    T[:3, 3] = [p.x, p.y, p.z]
+    if not np.isfinite(T).all():
+        raise SessionLogError("pose position contains NaN or inf")
+    return T
+
+
+# heading axis of the sensor -> the rotation whose that axis points along theta, level
+def _level_rotation(theta: float, heading_axis: str) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    if heading_axis == "x":  # body axes: x forward, y left, z up
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    if heading_axis == "z":  # OpenCV camera: x right, y down, z forward
+        return np.array([[s, 0.0, c], [-c, 0.0, s], [0.0, -1.0, 0.0]])
+    raise SessionLogError(f"heading axis '{heading_axis}' is not one of x, z")
+
+
+def planar_pose_to_pose(xytheta, heading_axis: str = "x") -> Pose:
+    x, y, theta = (float(v) for v in xytheta)
+    return _pose((x, y, 0.0), quaternion_from_matrix(_level_rotation(theta, heading_axis)))
+
+
+def planar_pose_from_pose(pose: Pose, heading_axis: str = "x") -> np.ndarray:
+    """(x, y, theta): position and the heading axis projected on the plane."""
+    T = matrix_from_pose(pose)
+    axis = {"x": 0, "z": 2}.get(heading_axis)
+    if axis is None:
+        raise SessionLogError(f"heading axis '{heading_axis}' is not one of x, z")
+    h = T[:3, axis]
+    if math.hypot(h[0], h[1]) < 1e-9:
+        raise SessionLogError(f"pose heading axis {heading_axis} is vertical: no planar heading")
+    return np.array([T[0, 3], T[1, 3], math.atan2(h[1], h[0])])
+
+
+# --- laser ------------------------------------------------------------------------------------
+def scan_to_msg(ranges: np.ndarray, angle_min: float, angle_increment: float, ns: int, frame_id: str = FRAME_LASER) -> LaserScan:
+    r = np.asarray(ranges, dtype=float)
+    msg = LaserScan(
+        timestamp=to_stamp(ns),
+        frame_id=frame_id,
+        start_angle=float(angle_min),
+        end_angle=float(angle_min + angle_increment * (r.size - 1)),
+        ranges=r.tolist(),
+    )
+    msg.pose.orientation.w = 1.0
+    return msg
+
+
+def scan_from_msg(msg: LaserScan) -> tuple[np.ndarray, float, float]:
+    """(ranges, angle_min, angle_increment). A scan origin off the sensor is refused:
+    /odometry already is the sensor pose."""
+    r = np.array(msg.ranges, dtype=float)
+    if r.size < 2:
+        raise SessionLogError(f"laser scan has {r.size} ranges, need at least 2")
+    p, o = msg.pose.position, msg.pose.orientation
+    if msg.HasField("pose") and (abs(p.x) + abs(p.y) + abs(p.z) > 1e-9 or abs(abs(o.w) - 1.0) > 1e-9):
+        raise SessionLogError("laser scan pose is not the identity (the scan origin must be the sensor in /odometry)")
+    inc = (msg.end_angle - msg.start_angle) / (r.size - 1)
+    return r, float(msg.start_angle), float(inc)
+
+
+# --- grid (BEV) -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BevGrid:
+    """A 2D float32 layer in the odometry plane (grid convention of ARCHITECTURE.md:
+    row 0 = smallest y), published on /zfloc/bev."""
+
+    values: np.ndarray  # (H, W) float32, e.g. occupancy log-odds
+    origin: np.ndarray  # (2,) metres, lower-left corner of cell (0, 0)
+    resolution: float  # metres per cell
+    name: str = "log_odds"
+
+
+def grid_to_msg(grid: BevGrid, ns: int, frame_id: str = FRAME_ODOM) -> Grid:
+    v = np.ascontiguousarray(grid.values, dtype="<f4")
+    h, w = v.shape
+    msg = Grid(timestamp=to_stamp(ns), frame_id=frame_id, column_count=w, row_stride=4 * w, cell_stride=4, data=v.tobytes())
+    msg.pose.position.x, msg.pose.position.y = (float(c) for c in grid.origin)
+    msg.pose.orientation.w = 1.0
+    msg.cell_size.x = msg.cell_size.y = float(grid.resolution)
+    msg.fields.append(PackedElementField(name=grid.name, offset=0, type=PackedElementField.FLOAT32))
+    return msg
+
+
+def grid_from_msg(msg: Grid) -> BevGrid:
+    if len(msg.fields) < 1 or msg.fields[0].type != PackedElementField.FLOAT32 or msg.cell_stride != 4:
+        raise SessionLogError("grid must hold one FLOAT32 field with cell_stride 4")
+    w = int(msg.column_count)
+    if w <= 0 or msg.row_stride != 4 * w or len(msg.data) % msg.row_stride:
+        raise SessionLogError(f"grid data of {len(msg.data)} bytes does not fit {w} columns (row stride {msg.row_stride})")
+    values = np.frombuffer(msg.data, dtype="<f4").reshape(-1, w).astype(np.float32)
+    origin = np.array([msg.pose.position.x, msg.pose.position.y])
+    return BevGrid(values, origin, float(msg.cell_size.x), msg.fields[0].name)
+
+
+# --- status (JSON) ----------------------------------------------------------------------------
+STATUS_SCHEMA_NAME = "zfloc.Status"
+_NUM = {"type": ["number", "null"]}
+_POSE = {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
+_ALIGNMENT = {
+    "type": ["object", "null"],
+    "properties": {"s": {"type": "number"}, "theta": {"type": "number"}, "tx": {"type": "number"}, "ty": {"type": "number"}},
+}
+STATUS_JSON_SCHEMA = {
+    "$schema": "http://json-schema.org/draft-07/schema#",
+    "title": STATUS_SCHEMA_NAME,
+    "description": "Per-frame localizer state. Floats are exact (repr); NaN is written as null.",
+    "type": "object",
+    "properties": {
+        "frame": {"type": "integer"},
+        "timestamp": {"type": "number"},
+        "status": {"type": "string", "enum": list(STATUSES)},
+        "score": _NUM,
+        "scale": _NUM,
+        "pose": _POSE,
+        "covariance": {"type": ["array", "null"], "items": _NUM, "minItems": 9, "maxItems": 9},
+        "alignment": _ALIGNMENT,
+        "weights": {"type": "array", "items": {"type": "number"}},
+        "hypotheses": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "properties": {"weight": _NUM, "score": _NUM, "pose": _POSE, "alignment": _ALIGNMENT},
+            },
+        },
+        "skipped": {"type": ["string", "null"]},
+        "timings": {"type": "object", "additionalProperties": {"type": "number"}},
+    },
+    "required": ["frame", "timestamp", "status"],
+}
+STATUS_JSON_SCHEMA_BYTES = json.dumps(STATUS_JSON_SCHEMA).encode()
+MEASURED_STATUS_KEYS = ("timings",)  # wall-clock measurements: never compared by --check
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _nums(a) -> list | None:
+    return None if a is None else [_num(v) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def _alignment_json(a: Sim2 | None) -> dict | None:
+    return None if a is None else {"s": _num(a.s), "theta": _num(a.theta), "tx": _num(a.t[0]), "ty": _num(a.t[1])}
+
+
+def status_to_json(est: Estimate) -> dict:
+    return {
+        "frame": int(est.frame),
+        "timestamp": _num(est.timestamp),
+        "status": est.status,
+        "score": _num(est.score),
+        "scale": _num(est.scale),
+        "pose": _nums(est.pose),
+        "covariance": _nums(est.covariance),
+        "alignment": _alignment_json(est.alignment),
+        "weights": [_num(a.weight) for a in est.alternatives],
+        "hypotheses": [
+            {"weight": _num(a.weight), "score": _num(a.score), "pose": _nums(a.pose), "alignment": _alignment_json(a.alignment)}
+            for a in est.alternatives
+        ],
+        "skipped": est.skipped,
+        "timings": {str(k): float(v) for k, v in est.timings.items()},
+    }
+
+
+def encode_status(status: dict) -> bytes:
+    return json.dumps(status, allow_nan=False, separators=(",", ":")).encode()
+
+
+def decode_status(data: bytes) -> dict:
+    try:
+        status = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise SessionLogError(f"status is not valid JSON ({err})") from None
+    if not isinstance(status, dict) or not {"frame", "timestamp", "status"} <= status.keys():
+        raise SessionLogError("status JSON lacks frame, timestamp or status")
+    return status
+
+
+def _f(v) -> float:
+    return float("nan") if v is None else float(v)
+
+
+def _sim2(d: dict | None) -> Sim2 | None:
+    return None if d is None else Sim2(_f(d["s"]), _f(d["theta"]), (_f(d["tx"]), _f(d["ty"])))
+
+
+def estimate_from_status(status: dict) -> Estimate:
+    """The Estimate a status message describes (for consumers of logged sessions)."""
+    try:
+        pose = None if status.get("pose") is None else np.array([_f(v) for v in status["pose"]])
+        cov = None if status.get("covariance") is None else np.array([_f(v) for v in status["covariance"]]).reshape(3, 3)
+        alts = tuple(
+            Alternative(_sim2(h["alignment"]), np.array([_f(v) for v in h["pose"]]), _f(h["weight"]), _f(h["score"]))
+            for h in status.get("hypotheses", [])
+        )
+        return Estimate(
+            int(status["frame"]),
+            _f(status["timestamp"]),
+            str(status["status"]),
+            pose,
+            cov,
+            _sim2(status.get("alignment")),
+            _f(status.get("score")),
+            alts,
+            {str(k): float(v) for k, v in (status.get("timings") or {}).items()},
+            status.get("skipped"),
+        )
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise SessionLogError(f"status JSON is malformed ({type(err).__name__}: {err})") from None
+
+
+def hypotheses_to_msg(est: Estimate, ns: int) -> PosesInFrame:
+    msg = PosesInFrame(timestamp=to_stamp(ns), frame_id=FRAME_FLOORPLAN)
+    for alt in est.alternatives:
+        msg.poses.append(planar_pose_to_pose(alt.pose, "x"))
+    return msg
+
+
+def estimate_pose_to_msg(est: Estimate, ns: int) -> PoseInFrame:
+    return PoseInFrame(timestamp=to_stamp(ns), frame_id=FRAME_FLOORPLAN, pose=planar_pose_to_pose(est.pose, "x"))

@@ -1,0 +1,227 @@
+"""The session sink: every input and output of a run, in one Foxglove-compatible MCAP file.
+
+    with SessionWriter("session.mcap", settings, floorplan) as log:
+        for index, frame in enumerate(frames):
+            frame = log.write_frame(index, frame)   # push the frame *as logged*
+            est = localizer.push(frame)
+            log.write_estimate(est, localizer)      # BEV published every n frames
+
+write_frame returns the frame rebuilt from the messages it wrote (quaternion, time and
+scan angles round-tripped). Pushing that frame makes the live run and a later replay see
+the same bits, which is what `zfloc-replay --check` verifies.
+
+Crash safety: settings and floorplan are written first, outside chunks; chunks are closed
+every `logging.chunk_max_frames` frames (or `chunk_size` bytes) and handed to the OS after
+every frame, so a process killed at any point leaves the finished chunks readable with
+`read_session(path, salvage=True)`.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from .. import __version__
+from ..config import Settings, dump_settings
+from ..errors import SessionLogError
+from ..estimate import Estimate
+from ..frames import CameraFrame, LaserFrame
+from . import schemas as S
+from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
+
+_COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+_MEDIA_TYPES = {".yaml": "application/yaml", ".yml": "application/yaml", ".png": "image/png", ".pgm": "image/x-portable-graymap"}
+
+
+def bev_grid_of(source) -> S.BevGrid | None:
+    """The BEV layer to publish, from a BevGrid, a RollingBEV or a Localizer (duck-typed:
+    an object with `log_odds_grid() -> (values, origin, resolution)`, or its `.bev`)."""
+    if source is None or isinstance(source, S.BevGrid):
+        return source
+    bev = getattr(source, "bev", source)
+    getter = getattr(bev, "log_odds_grid", None)
+    if getter is None:
+        return None
+    out = getter()
+    if out is None:
+        return None
+    values, origin, resolution = out
+    if getattr(values, "size", 0) == 0:
+        return None
+    return S.BevGrid(values, origin, float(resolution))
+
+
+class SessionWriter:
+    """Writes one session file. Use as a context manager (or call close())."""
+
+    def __init__(self, path: str | Path, settings: Settings, floorplan=None, metadata: dict[str, str] | None = None):
+        self.path = Path(path)
+        self.settings = settings
+        self._cfg = settings.logging
+        try:
+            self._file = open(self.path, "wb")  # noqa: SIM115 - owned until close()
+        except OSError as err:
+            raise SessionLogError(f"cannot create session file {self.path}: {err.strerror or err}") from None
+        self._mcap = Writer(self._file, chunk_size=self._cfg.chunk_size, compression=_COMPRESSION[self._cfg.compression])
+        self._mcap.start(profile="", library=f"zfloc-stream/{__version__}")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple, int] = {}
+        self._frames_in_chunk = 0
+        self._last_frame: tuple[float, int] | None = None  # (timestamp as logged, ns)
+        self._closed = False
+        self.frames_written = 0
+        # Settings and floorplan first, outside chunks: a truncated file still has them.
+        self._mcap.add_metadata(S.METADATA_SETTINGS, {"yaml": dump_settings(settings)})
+        info = {"format": S.SESSION_FORMAT, "writer": f"zfloc-stream/{__version__}"}
+        info.update({str(k): str(v) for k, v in (metadata or {}).items()})
+        self._mcap.add_metadata(S.METADATA_SESSION, info)
+        if floorplan is not None:
+            self._attach_floorplan(floorplan)
+        self._file.flush()
+
+    # --- context manager ---------------------------------------------------------------
+    def __enter__(self) -> SessionWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()  # even after an error: a finished file with everything written so far
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._mcap.finish()
+        finally:
+            self._file.close()
+
+    # --- inputs -------------------------------------------------------------------------
+    def write_frame(self, index: int, frame: CameraFrame | LaserFrame) -> CameraFrame | LaserFrame:
+        """Log one input frame; returns it as a reader will rebuild it (push that one)."""
+        self._check_open()
+        ns = S.seconds_to_ns(frame.timestamp)
+        if self._last_frame is not None and ns <= self._last_frame[1]:
+            raise SessionLogError(
+                f"{self.path}: frame {index} timestamp {frame.timestamp} is not after the previous frame's: "
+                "a session needs strictly increasing timestamps"
+            )
+        if self._frames_in_chunk >= self._cfg.chunk_max_frames:
+            self._mcap.flush()  # close the chunk: bounds what a crash can lose
+            self._frames_in_chunk = 0
+        if isinstance(frame, CameraFrame):
+            logged = self._write_camera(index, frame, ns)
+        elif isinstance(frame, LaserFrame):
+            logged = self._write_laser(index, frame, ns)
+        else:
+            raise SessionLogError(f"cannot log a {type(frame).__name__}: expected CameraFrame or LaserFrame")
+        self._last_frame = (logged.timestamp, ns)
+        self._frames_in_chunk += 1
+        self.frames_written += 1
+        self._file.flush()
+        return logged
+
+    def _write_camera(self, index: int, frame: CameraFrame, ns: int) -> CameraFrame:
+        h, w = frame.depth.shape
+        calib = S.calibration_to_msg(frame.K, w, h, ns)
+        depth = S.depth_to_msg(frame.depth, ns)
+        labels = None if frame.labels is None else S.labels_to_msg(frame.labels, ns)
+        odom = S.pose_to_msg(frame.T_odom_cam, ns, S.FRAME_ODOM)
+        gt = None
+        if frame.ground_truth is not None:
+            gt = S.PoseInFrame(timestamp=S.to_stamp(ns), frame_id=S.FRAME_FLOORPLAN, pose=S.planar_pose_to_pose(frame.ground_truth, "z"))
+        axis = {S.HEADING_AXIS_KEY: "z"}
+        self._write(S.TOPIC_CALIBRATION, calib, ns, index)
+        self._write(S.TOPIC_DEPTH, depth, ns, index)
+        if labels is not None:
+            self._write(S.TOPIC_LABELS, labels, ns, index)
+        self._write(S.TOPIC_ODOMETRY, odom, ns, index, axis)
+        if gt is not None:
+            self._write(S.TOPIC_GROUND_TRUTH, gt, ns, index, axis)
+        return camera_frame_from_msgs(depth, labels, calib, odom, gt, "z", S.ns_to_seconds(ns))
+
+    def _write_laser(self, index: int, frame: LaserFrame, ns: int) -> LaserFrame:
+        scan = S.scan_to_msg(frame.ranges, frame.angle_min, frame.angle_increment, ns)
+        odom = S.pose_to_msg(frame.T_odom_sensor, ns, S.FRAME_ODOM)
+        gt = None
+        if frame.ground_truth is not None:
+            gt = S.PoseInFrame(timestamp=S.to_stamp(ns), frame_id=S.FRAME_FLOORPLAN, pose=S.planar_pose_to_pose(frame.ground_truth, "x"))
+        limits = {S.RANGE_MIN_KEY: repr(float(frame.range_min)), S.RANGE_MAX_KEY: repr(float(frame.range_max))}
+        axis = {S.HEADING_AXIS_KEY: "x"}
+        self._write(S.TOPIC_SCAN, scan, ns, index, limits)
+        self._write(S.TOPIC_ODOMETRY, odom, ns, index, axis)
+        if gt is not None:
+            self._write(S.TOPIC_GROUND_TRUTH, gt, ns, index, axis)
+        return laser_frame_from_msgs(scan, float(frame.range_min), float(frame.range_max), odom, gt, "x", S.ns_to_seconds(ns))
+
+    # --- outputs ------------------------------------------------------------------------
+    def write_estimate(self, estimate: Estimate, bev=None) -> None:
+        """Log the localizer's output for the frame just written. `bev`: a Localizer, a
+        RollingBEV or a BevGrid; published every `logging.bev_every_n_frames` frames."""
+        self._check_open()
+        ns = self._estimate_ns(estimate)
+        seq = int(estimate.frame)
+        if estimate.pose is not None:
+            self._write(S.TOPIC_POSE, S.estimate_pose_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})
+        self._write(S.TOPIC_HYPOTHESES, S.hypotheses_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})
+        n = self._cfg.bev_every_n_frames
+        if bev is not None and n > 0 and estimate.frame % n == 0:
+            grid = bev_grid_of(bev)
+            if grid is not None:
+                self._write(S.TOPIC_BEV, S.grid_to_msg(grid, ns), ns, seq)
+        self._write_json(S.TOPIC_STATUS, S.status_to_json(estimate), ns, seq)
+        self._file.flush()
+
+    def _estimate_ns(self, estimate: Estimate) -> int:
+        # Same log time as its frame's messages, even where float seconds cannot hold ns.
+        if self._last_frame is not None and estimate.timestamp == self._last_frame[0]:
+            return self._last_frame[1]
+        return S.seconds_to_ns(estimate.timestamp)
+
+    # --- records ------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise SessionLogError(f"session file {self.path} is already closed")
+
+    def _channel(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes, message_encoding: str, metadata: dict) -> int:
+        key = (topic, schema_name, tuple(sorted(metadata.items())))
+        channel = self._channels.get(key)
+        if channel is None:
+            schema = self._schemas.get(schema_name)
+            if schema is None:
+                schema = self._mcap.register_schema(name=schema_name, encoding=schema_encoding, data=schema_data)
+                self._schemas[schema_name] = schema
+            channel = self._mcap.register_channel(topic=topic, message_encoding=message_encoding, schema_id=schema, metadata=metadata)
+            self._channels[key] = channel
+        return channel
+
+    def _write(self, topic: str, msg, ns: int, sequence: int, metadata: dict | None = None) -> None:
+        name = type(msg).DESCRIPTOR.full_name
+        if name not in self._schemas:
+            data = build_file_descriptor_set(type(msg)).SerializeToString()
+        else:
+            data = b""
+        channel = self._channel(topic, name, SchemaEncoding.Protobuf, data, MessageEncoding.Protobuf, metadata or {})
+        self._mcap.add_message(channel, log_time=ns, data=msg.SerializeToString(), publish_time=ns, sequence=sequence)
+
+    def _write_json(self, topic: str, payload: dict, ns: int, sequence: int) -> None:
+        channel = self._channel(topic, S.STATUS_SCHEMA_NAME, SchemaEncoding.JSONSchema, S.STATUS_JSON_SCHEMA_BYTES, MessageEncoding.JSON, {})
+        self._mcap.add_message(channel, log_time=ns, data=S.encode_status(payload), publish_time=ns, sequence=sequence)
+
+    def _attach_floorplan(self, floorplan) -> None:
+        with tempfile.TemporaryDirectory(prefix="zfloc-floorplan-") as tmp:
+            floorplan.write_ros(tmp, "floorplan")
+            files = sorted(p for p in Path(tmp).iterdir() if p.is_file())
+            if not any(p.suffix in (".yaml", ".yml") for p in files):
+                raise SessionLogError("floorplan.write_ros wrote no YAML file: cannot embed the floorplan")
+            for p in files:
+                self._mcap.add_attachment(
+                    create_time=0,
+                    log_time=0,
+                    name=S.ATTACHMENT_FLOORPLAN_PREFIX + p.name,
+                    media_type=_MEDIA_TYPES.get(p.suffix, "application/octet-stream"),
+                    data=p.read_bytes(),
+                )
