@@ -42,6 +42,7 @@ class CircleSettings(Section):
     """HDBSCAN clustering + 3-point RANSAC + angular checks (paper 3.1)."""
 
     min_cluster_size: int = 10
+    hdbscan_min_samples: int = 2  # small: a thin pillar ring has few points per neighbourhood (larger values drop arc points as noise)
     ransac_iterations: int = 100
     inlier_distance: float = 0.03  # m
     min_radius: float = 0.1  # m

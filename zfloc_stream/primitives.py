@@ -292,7 +292,13 @@ def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) 
     if len(keep) < settings.min_cluster_size:
         return CircleSet.empty()
     sub = pts[keep]
-    labels = HDBSCAN(min_cluster_size=settings.min_cluster_size, copy=True).fit_predict(sub)
+    # allow_single_cluster: after the group filter one pillar may be all that is left.
+    labels = HDBSCAN(
+        min_cluster_size=settings.min_cluster_size,
+        min_samples=settings.hdbscan_min_samples,
+        allow_single_cluster=True,
+        copy=True,
+    ).fit_predict(sub)
     centres, radii = [], []
     for k in range(labels.max() + 1):
         cluster = sub[labels == k]
