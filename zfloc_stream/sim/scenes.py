@@ -1,0 +1,593 @@
+"""Built-in procedural scenes, shipped as code and fully determined by (name, seed).
+
+Each generator lays out rooms (corridors and halls are rooms too), connects them with
+doors, adds round pillars and furniture, and hands the plan to `layout.build_walls`. The
+resulting `Scene` keeps the geometry as primitives (for the 3D renderer) and as a 0.05 m
+occupancy raster (the floorplan the localizer sees: walls and pillars, not furniture).
+
+Registry: `SCENES` maps a name to its generator; `build_scene(name, seed=0)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import InputError
+from ..rng import make_rng
+from .layout import (RESOLUTION, Connection, Door, Grid, Room, build_walls, grid_around,
+                     rasterize_boxes, rasterize_discs, snap, wall_boxes)
+
+EXTERIOR_WALL = 0.25  # m, 5 cells
+INTERIOR_WALL = 0.15  # m, 3 cells
+DOOR_WIDTH = 0.9  # m
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A building: 3D primitives + its rasterised floorplan.
+
+    walls: (N, 2, 2) centre segments of solid wall boxes; wall_thickness (N,).
+    pillars: (M, 3) cx, cy, radius (floor to ceiling cylinders).
+    furniture: (K, 6) cx, cy, size_x, size_y, yaw, height (boxes standing on the floor;
+    not in the floorplan).
+    occupied: (H, W) bool floorplan raster (walls + pillars), row 0 = smallest y.
+    free: (H, W) bool walkable space (inside the building, no wall, pillar or furniture).
+    """
+
+    name: str
+    seed: int
+    rooms: tuple[Room, ...]
+    walls: np.ndarray
+    wall_thickness: np.ndarray
+    doors: tuple[Door, ...]
+    pillars: np.ndarray
+    furniture: np.ndarray
+    wall_height: float
+    grid: Grid
+    occupied: np.ndarray
+    interior: np.ndarray
+    free: np.ndarray
+    target_area: float
+    waypoints: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+
+    # --- raster helpers ---------------------------------------------------------------
+    @property
+    def resolution(self) -> float:
+        return self.grid.resolution
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        return self.grid.origin
+
+    @property
+    def floor_area(self) -> float:
+        """Net floor area inside the building (m2): interior cells not wall or pillar."""
+        return float(self.interior.sum()) * self.resolution ** 2
+
+    def cells(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, col, inside-grid) of the cells holding (N, 2) points."""
+        p = (np.asarray(points, dtype=float).reshape(-1, 2) - self.origin) / self.resolution
+        col = np.floor(p[:, 0]).astype(np.int64)
+        row = np.floor(p[:, 1]).astype(np.int64)
+        h, w = self.grid.shape
+        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        return np.clip(row, 0, h - 1), np.clip(col, 0, w - 1), inside
+
+    def is_free(self, points) -> np.ndarray:
+        row, col, inside = self.cells(points)
+        return inside & self.free[row, col]
+
+    @cached_property
+    def clearance(self) -> np.ndarray:
+        """Metres from each free cell to the nearest non-free cell (0 outside free space)."""
+        return ndimage.distance_transform_edt(self.free) * self.resolution
+
+    def clearance_at(self, points) -> np.ndarray:
+        row, col, inside = self.cells(points)
+        return np.where(inside, self.clearance[row, col], 0.0)
+
+    # --- geometry views for the renderer ---------------------------------------------------
+    @cached_property
+    def wall_box_params(self):
+        """(centers (N, 2), half sizes (N, 2), yaws (N,)) of the wall boxes."""
+        return wall_boxes(self.walls, self.wall_thickness)
+
+    # --- floorplan --------------------------------------------------------------------------
+    @cached_property
+    def floorplan(self):
+        """The Floorplan of this scene (walls + pillars occupied, doors free, no furniture)."""
+        from ..floorplan import Floorplan  # late: floorplan.py depends on settings only
+
+        return Floorplan.from_occupancy(self.occupied, self.resolution, self.origin, name=self.name)
+
+    def write_ros(self, directory, name: str | None = None):
+        """Write the floorplan as ROS map_server YAML + PNG into `directory`."""
+        Path(directory).mkdir(parents=True, exist_ok=True)
+        return self.floorplan.write_ros(directory, name or self.name)
+
+    def room(self, name: str) -> Room:
+        for r in self.rooms:
+            if r.name == name:
+                return r
+        raise InputError(f"scene '{self.name}' has no room '{name}'")
+
+
+# --- small helpers --------------------------------------------------------------------------
+
+
+def _partition(lo: float, hi: float, wmin: float, wmax: float, rng, tries: int = 100) -> list[float]:
+    """Lattice cut positions splitting [lo, hi] into parts of random width in [wmin, wmax]."""
+    length = hi - lo
+    nmin, nmax = max(int(np.ceil(length / wmax)), 1), max(int(np.floor(length / wmin)), 1)
+    # prefer part counts whose mean width is well inside [wmin, wmax]: more variety
+    counts = [n for n in range(nmin, max(nmin, nmax) + 1)
+              if wmin + 0.2 * (wmax - wmin) <= length / n <= wmax - 0.2 * (wmax - wmin)] or [nmin]
+    n = int(rng.choice(counts))
+    widths = np.full(n, length / n)
+    slack = length - n * wmin
+    for _ in range(tries):
+        # wmin each plus a random (Dirichlet) share of the rest: sums to length, >= wmin
+        w = wmin + slack * rng.dirichlet(np.full(n, 2.0))
+        if w.max() <= wmax:
+            widths = w
+            break
+    cuts = [snap(lo + c) for c in np.cumsum(widths)[:-1]]
+    return [lo, *cuts, hi]
+
+
+def _shared_length(a: Room, b: Room) -> float:
+    """Length of the boundary two touching rectangles share (0 when they do not touch)."""
+    eps = 1e-6
+    if abs(a.x1 - b.x0) < eps or abs(b.x1 - a.x0) < eps:
+        return max(0.0, min(a.y1, b.y1) - max(a.y0, b.y0))
+    if abs(a.y1 - b.y0) < eps or abs(b.y1 - a.y0) < eps:
+        return max(0.0, min(a.x1, b.x1) - max(a.x0, b.x0))
+    return 0.0
+
+
+def _random_tree_doors(rooms: list[Room], rng, extra_prob: float = 0.3, min_shared: float = 1.6):
+    """Doors along a random spanning tree of the room adjacency graph, plus a few extra."""
+    pairs = [(i, j) for i in range(len(rooms)) for j in range(i + 1, len(rooms))
+             if _shared_length(rooms[i], rooms[j]) >= min_shared]
+    order = rng.permutation(len(pairs))
+    parent = list(range(len(rooms)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    out = []
+    for k in order:
+        i, j = pairs[k]
+        ri, rj = find(i), find(j)
+        if ri != rj:
+            parent[ri] = rj
+            out.append(Connection(i, j, "door", DOOR_WIDTH))
+        elif rng.random() < extra_prob:
+            out.append(Connection(i, j, "door", DOOR_WIDTH))
+    return out
+
+
+# Furniture catalogue: (name, length along the wall, depth, height)
+_WALL_ITEMS = (
+    ("wardrobe", 1.2, 0.6, 2.0),
+    ("shelf", 1.0, 0.4, 1.8),
+    ("desk", 1.4, 0.7, 0.75),
+    ("cabinet", 0.8, 0.45, 1.1),
+    ("sofa", 2.0, 0.9, 0.85),
+    ("bed", 2.0, 1.4, 0.55),
+    ("counter", 2.4, 0.6, 0.9),
+)
+_FREE_ITEMS = (("table", 1.6, 0.9, 0.75), ("table_small", 1.2, 0.7, 0.75), ("crate", 0.8, 0.8, 1.0))
+
+
+def _door_keepouts(doors, depth: float = 1.3, side: float = 0.3) -> np.ndarray:
+    """Axis-aligned (xmin, ymin, xmax, ymax) rectangles in front of every door."""
+    out = []
+    for d in doors:
+        cx, cy = d.center
+        half = d.width / 2 + side
+        if d.axis == "h":
+            out.append((cx - half, cy - depth, cx + half, cy + depth))
+        else:
+            out.append((cx - depth, cy - half, cx + depth, cy + half))
+    return np.asarray(out, dtype=float).reshape(-1, 4)
+
+
+def _overlaps(box, boxes: np.ndarray, gap: float = 0.0) -> bool:
+    if len(boxes) == 0:
+        return False
+    b = np.asarray(boxes)
+    return bool(np.any((box[0] < b[:, 2] + gap) & (box[2] > b[:, 0] - gap)
+                       & (box[1] < b[:, 3] + gap) & (box[3] > b[:, 1] - gap)))
+
+
+def _furnish(rooms: list[Room], doors, pillars: np.ndarray, rng,
+             wall_kinds=("room",), free_kinds=("open", "hall")) -> np.ndarray:
+    """Furniture boxes (K, 6): against the walls of ordinary rooms, and free-standing
+    tables far from everything in open areas, so that no door or passage gets blocked."""
+    keepouts = _door_keepouts(doors)
+    placed: list[tuple] = []  # axis-aligned footprints, for overlap tests
+    items: list[tuple] = []
+    inset = EXTERIOR_WALL / 2 + 0.05
+    for room in rooms:
+        x0, y0, x1, y1 = room.x0 + inset, room.y0 + inset, room.x1 - inset, room.y1 - inset
+        small = min(x1 - x0, y1 - y0)
+        if room.kind in wall_kinds:
+            max_depth = min(0.3 * small, 1.0)
+            n_items = int(rng.integers(1, 2 + min(3, int(room.area // 8))))
+            for _ in range(n_items):
+                for _try in range(20):
+                    name, length, depth, height = _WALL_ITEMS[rng.integers(len(_WALL_ITEMS))]
+                    side = int(rng.integers(4))  # 0 south, 1 north, 2 west, 3 east
+                    wall_len = (x1 - x0) if side < 2 else (y1 - y0)
+                    if depth > max_depth or length > 0.8 * wall_len:
+                        continue
+                    along = rng.uniform(length / 2, wall_len - length / 2)
+                    if side == 0:
+                        cx, cy, sx, sy = x0 + along, y0 + depth / 2, length, depth
+                    elif side == 1:
+                        cx, cy, sx, sy = x0 + along, y1 - depth / 2, length, depth
+                    elif side == 2:
+                        cx, cy, sx, sy = x0 + depth / 2, y0 + along, depth, length
+                    else:
+                        cx, cy, sx, sy = x1 - depth / 2, y0 + along, depth, length
+                    box = (cx - sx / 2, cy - sy / 2, cx + sx / 2, cy + sy / 2)
+                    if _overlaps(box, keepouts) or _overlaps(box, placed, gap=0.1):
+                        continue
+                    if len(pillars) and np.any(np.hypot(pillars[:, 0] - cx, pillars[:, 1] - cy)
+                                               < pillars[:, 2] + 0.5 * np.hypot(sx, sy) + 0.3):
+                        continue
+                    placed.append(box)
+                    items.append((cx, cy, sx, sy, 0.0, height))
+                    break
+        elif room.kind in free_kinds:
+            clear = 1.5  # m of free space kept around every free-standing piece
+            n_items = int(rng.integers(1, 2 + int(room.area // 40)))
+            for _ in range(n_items):
+                for _try in range(20):
+                    name, length, depth, height = _FREE_ITEMS[rng.integers(len(_FREE_ITEMS))]
+                    radius = 0.5 * np.hypot(length, depth)
+                    lo_x, hi_x = x0 + clear + radius, x1 - clear - radius
+                    lo_y, hi_y = y0 + clear + radius, y1 - clear - radius
+                    if lo_x >= hi_x or lo_y >= hi_y:
+                        break
+                    cx, cy = rng.uniform(lo_x, hi_x), rng.uniform(lo_y, hi_y)
+                    box = (cx - radius, cy - radius, cx + radius, cy + radius)
+                    if _overlaps(box, keepouts) or _overlaps(box, placed, gap=clear):
+                        continue
+                    if len(pillars) and np.any(np.hypot(pillars[:, 0] - cx, pillars[:, 1] - cy)
+                                               < pillars[:, 2] + radius + clear):
+                        continue
+                    placed.append(box)
+                    items.append((cx, cy, length, depth, float(rng.uniform(-np.pi, np.pi)), height))
+                    break
+    return np.asarray(items, dtype=float).reshape(-1, 6)
+
+
+def _assemble(name: str, seed: int, rooms: list[Room], connections: list[Connection], rng,
+              pillars=(), furniture=None, wall_height: float = 2.7, target_area: float = 0.0,
+              waypoints: dict | None = None, info: dict | None = None, doors=None, walls=None) -> Scene:
+    """Walls from the plan, raster, interior and walkable masks, waypoints."""
+    if walls is None:
+        segments, thickness, doors = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
+    else:
+        segments, thickness = walls
+    pillars = np.asarray(pillars, dtype=float).reshape(-1, 3)
+    if furniture is None:
+        furniture = _furnish(rooms, doors, pillars, rng)
+    corners = np.array([[r.x0, r.y0] for r in rooms] + [[r.x1, r.y1] for r in rooms])
+    grid = grid_around(corners, margin=1.0)
+    occupied = rasterize_boxes(grid, *wall_boxes(segments, thickness))
+    rasterize_discs(grid, pillars, out=occupied)
+    # Outside = free cells connected to the grid border; the building is closed.
+    labels, _ = ndimage.label(~occupied)
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    interior = ~occupied & ~np.isin(labels, border[border > 0])
+    furn_cells = rasterize_boxes(grid, furniture[:, :2], furniture[:, 2:4] / 2, furniture[:, 4])
+    free = interior & ~furn_cells
+    scene = Scene(name, int(seed), tuple(rooms), segments, thickness, tuple(doors), pillars,
+                  furniture, float(wall_height), grid, occupied, interior, free,
+                  float(target_area), {}, dict(info or {}))
+    wp = {r.name: _best_point(scene, r) for r in rooms}
+    wp.update(waypoints or {})
+    object.__setattr__(scene, "waypoints", wp)
+    return scene
+
+
+def _best_point(scene: Scene, room: Room) -> tuple[float, float]:
+    """The room centre, or the free cell of the room farthest from obstacles if the centre
+    is blocked (pillar, table)."""
+    cx, cy = room.center
+    if scene.clearance_at([[cx, cy]])[0] >= 0.5:
+        return (cx, cy)
+    r0, r1, c0, c1 = scene.grid.window(room.x0, room.y0, room.x1, room.y1)
+    sub = scene.clearance[r0:r1, c0:c1]
+    i, j = np.unravel_index(np.argmax(sub), sub.shape)
+    x, y = scene.grid.centres(np.array(r0 + i), np.array(c0 + j))
+    return (float(x), float(y))
+
+
+# --- generators -------------------------------------------------------------------------------
+
+
+def _gen_rooms(seed: int) -> Scene:
+    """2-4 rooms, ~40 m2: a rectangle cut guillotine-style, doors on a random tree."""
+    rng = make_rng(seed, "scene", "rooms")
+    area = rng.uniform(36.0, 43.0)
+    aspect = rng.uniform(1.1, 1.6)
+    width = np.sqrt(area * aspect)
+    x0, y0 = snap(0.0), snap(0.0)
+    rects = [(x0, y0, snap(width), snap(area / width))]
+    n_rooms = int(rng.integers(1, 4))  # plus a small alcove room outside the rectangle
+    min_side = 2.4
+    while len(rects) < n_rooms:
+        order = np.argsort([-(r[2] - r[0]) * (r[3] - r[1]) for r in rects])
+        for k in order:
+            a, b, c, d = rects[k]
+            horizontal = (c - a) >= (d - b)  # cut across the longer side
+            lo, hi = (a, c) if horizontal else (b, d)
+            if hi - lo < 2 * min_side + 0.1:
+                continue
+            cut = snap(lo + rng.uniform(max(0.35, min_side / (hi - lo)),
+                                        min(0.65, 1 - min_side / (hi - lo))) * (hi - lo))
+            rects[k:k + 1] = [(a, b, cut, d), (cut, b, c, d)] if horizontal else [(a, b, c, cut), (a, cut, c, d)]
+            break
+        else:
+            break
+    rooms = [Room(f"room{i}", "room", *r) for i, r in enumerate(rects)]
+    rooms.append(_alcove(rooms, rng))
+    connections = _random_tree_doors(rooms[:-1], rng)
+    connections.append(Connection(len(rooms) - 2, len(rooms) - 1, "door", DOOR_WIDTH))
+    return _assemble("rooms", seed, rooms, connections, rng, wall_height=rng.uniform(2.5, 2.8),
+                     target_area=40.0)
+
+
+def _alcove(rooms: list[Room], rng) -> Room:
+    """A small room (closet, bathroom) stuck onto the outside of the building, off-centre
+    along one outer wall of one room: it breaks the outline's symmetry. Returned last; it
+    touches only rooms[-1] after the caller's reordering (the host room is moved last)."""
+    xmin, ymin = min(r.x0 for r in rooms), min(r.y0 for r in rooms)
+    xmax, ymax = max(r.x1 for r in rooms), max(r.y1 for r in rooms)
+    width, depth = rng.uniform(1.8, 2.6), rng.uniform(1.6, 2.2)
+    options = []  # (host index, side) with enough outer wall for the alcove
+    for i, r in enumerate(rooms):
+        for side, on_edge, extent in (("s", r.y0 == ymin, r.x1 - r.x0), ("n", r.y1 == ymax, r.x1 - r.x0),
+                                      ("w", r.x0 == xmin, r.y1 - r.y0), ("e", r.x1 == xmax, r.y1 - r.y0)):
+            if on_edge and extent >= width + 0.3:
+                options.append((i, side))
+    host_index, side = options[int(rng.integers(len(options)))]
+    host = rooms.pop(host_index)
+    rooms.append(host)  # host last, the alcove right after it
+    lo, hi = (host.x0, host.x1) if side in "sn" else (host.y0, host.y1)
+    slack = hi - lo - width
+    # keep the alcove near one end of the host wall: never centred
+    start = lo + (rng.uniform(0.0, 0.25) if rng.random() < 0.5 else rng.uniform(0.75, 1.0)) * slack
+    a, b = snap(start), snap(start + width)
+    if side == "s":
+        return Room("alcove", "room", a, snap(host.y0 - depth), b, host.y0)
+    if side == "n":
+        return Room("alcove", "room", a, host.y1, b, snap(host.y1 + depth))
+    if side == "w":
+        return Room("alcove", "room", snap(host.x0 - depth), a, host.x0, b)
+    return Room("alcove", "room", host.x1, a, snap(host.x1 + depth), b)
+
+
+def _gen_apartment(seed: int) -> Scene:
+    """~100 m2: a hallway with rooms on both sides and a living room across one end."""
+    rng = make_rng(seed, "scene", "apartment")
+    width, depth = rng.uniform(11.5, 13.0), rng.uniform(8.6, 9.6)
+    xa, xb, ya, yb = snap(0.0), snap(width), snap(0.0), snap(depth)
+    living_w = rng.uniform(4.2, 5.2)
+    living_west = bool(rng.random() < 0.5)
+    if living_west:
+        living = Room("living", "room", xa, ya, snap(xa + living_w), yb)
+        band = (living.x1, xb)
+    else:
+        living = Room("living", "room", snap(xb - living_w), ya, xb, yb)
+        band = (xa, living.x0)
+    h0 = snap(ya + rng.uniform(3.2, 4.0))
+    h1 = snap(h0 + rng.uniform(1.2, 1.5))
+    hallway = Room("hallway", "corridor", band[0], h0, band[1], h1)
+    rooms = [living, hallway]
+    connections = [Connection(0, 1, "open")]  # the hallway opens into the living room
+    south = _partition(band[0], band[1], 2.4, 4.6, rng)
+    north = _partition(band[0], band[1], 2.6, 4.6, rng)
+    for tag, cuts, lo, hi in (("south", south, ya, h0), ("north", north, h1, yb)):
+        for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+            rooms.append(Room(f"{tag}{k}", "room", a, lo, b, hi))
+            connections.append(Connection(1, len(rooms) - 1, "door", float(rng.choice([0.8, 0.9]))))
+            touches_living = abs(a - living.x1) < 1e-6 or abs(b - living.x0) < 1e-6
+            if touches_living and rng.random() < 0.5:
+                connections.append(Connection(0, len(rooms) - 1, "door", 0.9))
+    return _assemble("apartment", seed, rooms, connections, rng, wall_height=rng.uniform(2.5, 2.8),
+                     target_area=100.0, info={"living_west": living_west})
+
+
+def _open_plan_pillars(room: Room, rng, margin: float = 2.5) -> list[tuple[float, float, float]]:
+    """A regular pillar grid inside an open area, offset unevenly from its walls."""
+    spacing_x, spacing_y = rng.uniform(6.0, 7.5), rng.uniform(5.5, 7.0)
+    radius = float(rng.uniform(0.25, 0.35))
+    xs = np.arange(room.x0 + rng.uniform(margin, margin + 2.0), room.x1 - margin, spacing_x)
+    ys = np.arange(room.y0 + rng.uniform(margin, margin + 2.0), room.y1 - margin, spacing_y)
+    return [(snap(x), snap(y), radius) for x in xs for y in ys]
+
+
+def _gen_office(seed: int) -> Scene:
+    """~2500 m2: two long corridors joined by cross corridors, offices along the facades,
+    an open-plan area with round pillars, meeting rooms and service cores in the middle."""
+    rng = make_rng(seed, "scene", "office")
+    width = rng.uniform(56.0, 62.0)
+    depth = 2680.0 / width + rng.uniform(-1.0, 1.0)
+    ds, dn = rng.uniform(5.0, 6.5), rng.uniform(5.0, 6.5)
+    wc_s, wc_n = rng.uniform(1.8, 2.4), rng.uniform(1.8, 2.4)
+    X0, X1 = snap(0.0), snap(width)
+    y0, y5 = snap(0.0), snap(depth)
+    y1 = snap(ds)
+    y2 = snap(ds + wc_s)
+    y4 = snap(depth - dn)
+    y3 = snap(depth - dn - wc_n)
+    rooms: list[Room] = []
+    connections: list[Connection] = []
+
+    def add(room: Room) -> int:
+        rooms.append(room)
+        return len(rooms) - 1
+
+    cs = add(Room("corridor_s", "corridor", X0, y1, X1, y2))
+    cn = add(Room("corridor_n", "corridor", X0, y3, X1, y4))
+    for tag, lo, hi, corridor in (("s", y0, y1, cs), ("n", y4, y5, cn)):
+        cuts = _partition(X0, X1, 3.0, 6.0, rng)
+        k = 0
+        i = 0
+        while i < len(cuts) - 1:
+            # now and then two offices are one bigger room (meeting room, lab)
+            j = i + 2 if (i + 2 < len(cuts) and rng.random() < 0.15) else i + 1
+            idx = add(Room(f"office_{tag}{k}", "room", cuts[i], lo, cuts[j], hi))
+            connections.append(Connection(corridor, idx, "door", DOOR_WIDTH))
+            i, k = j, k + 1
+    # cross corridors split the middle band into an end block at each side and two blocks
+    wv = [rng.uniform(1.8, 2.4) for _ in range(3)]
+    xa = snap(rng.uniform(6.0, 9.0))
+    xc = snap(width - rng.uniform(6.0, 12.0) - wv[2])
+    xb = snap(rng.uniform(0.42, 0.58) * width)
+    cross_x = [(xa, snap(xa + wv[0])), (xb, snap(xb + wv[1])), (xc, snap(xc + wv[2]))]
+    cross = []
+    for k, (a, b) in enumerate(cross_x):
+        c = add(Room(f"cross{k}", "corridor", a, y2, b, y3))
+        connections += [Connection(c, cs, "open"), Connection(c, cn, "open")]
+        cross.append(c)
+    # end blocks: service cores (stairs, toilets, storage) opening onto the cross corridor
+    for tag, a, b, corridor in (("w", X0, cross_x[0][0], cross[0]), ("e", cross_x[2][1], X1, cross[2])):
+        cuts = _partition(y2, y3, 3.0, 8.0, rng)
+        for k, (lo, hi) in enumerate(zip(cuts[:-1], cuts[1:])):
+            idx = add(Room(f"core_{tag}{k}", "core", a, lo, b, hi))
+            connections.append(Connection(corridor, idx, "door", DOOR_WIDTH))
+    # middle blocks: one open-plan area with pillars, one with two rows of meeting rooms
+    blocks = [(cross_x[0][1], cross_x[1][0], cross[0], cross[1]), (cross_x[1][1], cross_x[2][0], cross[1], cross[2])]
+    open_first = bool(rng.random() < 0.5)
+    pillars: list[tuple[float, float, float]] = []
+    for k, (a, b, left, right) in enumerate(blocks):
+        if (k == 0) == open_first:
+            idx = add(Room(f"open{k}", "open", a, y2, b, y3))
+            connections += [Connection(idx, cs, "door", float(rng.uniform(2.5, 4.0))),
+                            Connection(idx, cn, "door", float(rng.uniform(2.5, 4.0))),
+                            Connection(idx, left, "door", 1.8)]
+            pillars += _open_plan_pillars(rooms[idx], rng)
+        else:
+            ym = snap(0.5 * (y2 + y3) + rng.uniform(-2.0, 2.0))
+            for tag, lo, hi, corridor in (("s", y2, ym, cs), ("n", ym, y3, cn)):
+                cuts = _partition(a, b, 4.0, 8.0, rng)
+                for m, (c0, c1) in enumerate(zip(cuts[:-1], cuts[1:])):
+                    idx = add(Room(f"meeting{k}_{tag}{m}", "room", c0, lo, c1, hi))
+                    connections.append(Connection(corridor, idx, "door", DOOR_WIDTH))
+    return _assemble("office", seed, rooms, connections, rng, pillars=pillars,
+                     wall_height=rng.uniform(2.7, 3.0), target_area=2500.0)
+
+
+def _gen_hall(seed: int) -> Scene:
+    """~500 m2: a pillared hall, a row of side rooms along part of one long side and an
+    entrance lobby off one short side (these break the hall's symmetry)."""
+    rng = make_rng(seed, "scene", "hall")
+    width, depth = rng.uniform(22.0, 26.0), rng.uniform(15.0, 18.0)
+    X0, Y0, X1, Y1 = snap(0.0), snap(0.0), snap(width), snap(depth)
+    rooms = [Room("hall", "hall", X0, Y0, X1, Y1)]
+    connections: list[Connection] = []
+    annex_end = snap(width * rng.uniform(0.55, 0.8))
+    annex_top = snap(depth + rng.uniform(4.0, 5.0))
+    cuts = _partition(X0, annex_end, 3.0, 6.0, rng)
+    for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        rooms.append(Room(f"side{k}", "room", a, Y1, b, annex_top))
+        connections.append(Connection(0, len(rooms) - 1, "door", DOOR_WIDTH))
+    ly0 = snap(rng.uniform(1.5, depth - 8.0))
+    rooms.append(Room("lobby", "room", X1, ly0, snap(width + rng.uniform(4.0, 6.0)), snap(ly0 + rng.uniform(5.0, 7.0))))
+    connections.append(Connection(0, len(rooms) - 1, "door", float(rng.uniform(2.4, 3.0))))
+    pillars = _open_plan_pillars(rooms[0], rng, margin=3.5)
+    return _assemble("hall", seed, rooms, connections, rng, pillars=pillars,
+                     wall_height=rng.uniform(2.8, 3.0), target_area=500.0)
+
+
+def _gen_symmetric(seed: int) -> Scene:
+    """A long corridor with rooms on both sides, point-symmetric about its centre (a place
+    and its 180-degree image look identical), plus an annex off the east end that is the
+    only distinguishing part.
+
+    Waypoints: 'symmetric_start' -> 'symmetric_end' runs along the corridor inside the
+    symmetric part, at least `info['sym_margin']` m from both ends (so neither the annex
+    nor its absent mirror image is within a 10 m sensor range); 'distinguishing' is in the
+    annex.
+    """
+    rng = make_rng(seed, "scene", "symmetric")
+    res = RESOLUTION
+    q = lambda v: float(np.round(v / res) * res)  # noqa: E731, symmetric lattice: q(-v) = -q(v)
+    half = q(rng.uniform(20.0, 23.0))
+    hw = q(rng.uniform(1.0, 1.2))
+    band = q(rng.uniform(4.0, 5.2))
+    # Everything is built about (0, 0) and shifted by half a cell, so the point reflection
+    # about the centre maps raster cell centres onto cell centres.
+    c = res / 2
+    rooms = [Room("corridor", "corridor", -half + c, -hw + c, half + c, hw + c)]
+    connections: list[Connection] = []
+    cuts = [q(v) for v in _partition(-half, half, 3.0, 5.5, rng)]
+    cuts[0], cuts[-1] = -half, half
+    furniture = []
+    for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        south = Room(f"south{k}", "room", a + c, -hw - band + c, b + c, -hw + c)
+        north = Room(f"north{k}", "room", -b + c, hw + c, -a + c, hw + band + c)
+        rooms += [south, north]
+        p = q(rng.uniform(a + 0.5 + DOOR_WIDTH / 2, b - 0.5 - DOOR_WIDTH / 2))
+        connections += [Connection(0, len(rooms) - 2, "door", DOOR_WIDTH, p + c),
+                        Connection(0, len(rooms) - 1, "door", DOOR_WIDTH, -p + c)]
+    annex = Room("annex", "room", half + c, -hw - q(rng.uniform(1.0, 2.0)) + c,
+                 half + q(rng.uniform(3.5, 4.5)) + c, hw + q(rng.uniform(2.0, 3.0)) + c)
+    rooms.append(annex)
+    connections.append(Connection(0, len(rooms) - 1, "open"))
+    segments, thickness, doors = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
+    # Furniture: furnish the south rooms, then mirror it into the north rooms through the
+    # centre so that the symmetric part stays symmetric in 3D as well.
+    south_rooms = [r for r in rooms if r.name.startswith("south")]
+    south_doors = [d for d in doors if rooms[d.rooms[1]].name.startswith("south")]
+    base = _furnish(south_rooms, south_doors, np.zeros((0, 3)), rng)
+    mirrored = base.copy()
+    mirrored[:, :2] = 2 * c - base[:, :2]
+    mirrored[:, 4] = base[:, 4] + np.pi
+    # One cabinet against the annex's far wall (the annex is open towards the corridor, so
+    # the generic furnisher, which treats every side as a wall, is not used there).
+    annex_furniture = np.array([[annex.x1 - EXTERIOR_WALL / 2 - 0.3, annex.center[1], 0.45, 1.2, 0.0, 1.1]])
+    furniture = np.concatenate([base, mirrored, annex_furniture])
+    margin = 13.0
+    waypoints = {
+        "symmetric_start": (-half + margin + c, c),
+        "symmetric_end": (half - margin + c, c),
+        "distinguishing": annex.center,
+    }
+    info = {"symmetry_center": (c, c), "symmetric_x_range": (-half + c, half + c), "sym_margin": margin}
+    return _assemble("symmetric", seed, rooms, connections, rng, furniture=furniture,
+                     wall_height=2.7, target_area=450.0, waypoints=waypoints, info=info,
+                     doors=doors, walls=(segments, thickness))
+
+
+SCENES = {
+    "rooms": _gen_rooms,
+    "apartment": _gen_apartment,
+    "office": _gen_office,
+    "symmetric": _gen_symmetric,
+    "hall": _gen_hall,
+}
+
+
+def build_scene(name: str, seed: int = 0) -> Scene:
+    """Build a registered scene; same (name, seed) -> identical scene."""
+    try:
+        generator = SCENES[name]
+    except (KeyError, TypeError):
+        raise InputError(f"unknown scene '{name}'; known scenes: {', '.join(sorted(SCENES))}") from None
+    return generator(int(seed))
