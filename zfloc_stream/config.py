@@ -175,6 +175,7 @@ class BevSettings(Section):
     free_threshold: float = -0.3  # log-odds below this: observed free space
     occupied_threshold: float = 0.0  # log-odds above this: occupied
     wall_min_observations: int = 1  # frames that saw wall evidence in a cell before it is a wall point
+    wall_min_ratio: float = 0.5  # ...and at least this fraction of the frames that hit the cell
     free_margin: float = 0.1  # m, rays stop this short of the obstacle they hit
     azimuth_bin_deg: float = 0.5  # camera free space: one ray per azimuth bin
     crop_margin: float = 0.5  # m, observation is cropped to the known cells plus this margin
@@ -280,6 +281,7 @@ class MappingSettings(Section):
 
 class SimDatasetSettings(Section):
     n_frames: int = 300  # frames simulated per built-in scene
+    scene_seed: int = 0  # building layout (the walk and noise follow settings.seed)
 
 
 class DatasetSettings(Section):

@@ -17,8 +17,16 @@ from .errors import FrameError
 UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
 
 
+def _as_float_array(value, name: str, dtype=float) -> np.ndarray:
+    """np.asarray that reports non-numeric input as a FrameError instead of a raw error."""
+    try:
+        return np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError):
+        raise FrameError(f"{name} must be a numeric array") from None
+
+
 def _check_pose(T, name: str) -> np.ndarray:
-    T = np.asarray(T, dtype=float)
+    T = _as_float_array(T, name)
     if T.shape != (4, 4):
         raise FrameError(f"{name} must be a 4x4 matrix, got shape {T.shape}")
     if not np.isfinite(T).all():
@@ -29,6 +37,15 @@ def _check_pose(T, name: str) -> np.ndarray:
     if np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-9:
         raise FrameError(f"{name} last row must be [0, 0, 0, 1]")
     return T
+
+
+def _check_scalar(value, name: str) -> None:
+    try:
+        ok = np.isfinite(float(value))
+    except (TypeError, ValueError):
+        raise FrameError(f"{name} must be a number, got {value!r}") from None
+    if not ok:
+        raise FrameError(f"{name} is not finite")
 
 
 @dataclass(frozen=True)
@@ -50,11 +67,9 @@ class CameraFrame:
     ground_truth: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self):
-        d = np.asarray(self.depth)
+        d = _as_float_array(self.depth, "depth", np.float32)
         if d.ndim != 2 or d.size == 0:
             raise FrameError(f"depth must be a non-empty HxW array, got shape {d.shape}")
-        if d.dtype != np.float32:
-            d = d.astype(np.float32)
         if np.isinf(d).any():
             raise FrameError("depth contains inf")
         valid = np.isfinite(d) & (d != 0)
@@ -69,15 +84,18 @@ class CameraFrame:
                 raise FrameError(f"labels shape {lab.shape} does not match depth shape {d.shape}")
             if lab.dtype != np.uint8:
                 raise FrameError(f"labels must be uint8, got {lab.dtype}")
-        K = np.asarray(self.K, dtype=float)
+            if lab.max() > OTHER:
+                raise FrameError(f"labels contain code {int(lab.max())}; valid codes are 0..{OTHER}")
+        K = _as_float_array(self.K, "K")
         if K.shape != (3, 3) or not np.isfinite(K).all():
             raise FrameError("K must be a finite 3x3 matrix")
         if abs(np.linalg.det(K)) < 1e-12 or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise FrameError("K is singular (focal lengths must be positive)")
+        if np.abs(K[2] - [0, 0, 1]).max() > 1e-9 or abs(K[1, 0]) > 1e-9:
+            raise FrameError("K must be upper triangular with last row [0, 0, 1]")
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "T_odom_cam", _check_pose(self.T_odom_cam, "T_odom_cam"))
-        if not np.isfinite(self.timestamp):
-            raise FrameError("timestamp is not finite")
+        _check_scalar(self.timestamp, "timestamp")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -101,13 +119,12 @@ class LaserFrame:
     ground_truth: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self):
-        r = np.asarray(self.ranges, dtype=float)
+        r = _as_float_array(self.ranges, "ranges")
         if r.ndim != 1 or r.size == 0:
             raise FrameError(f"ranges must be a non-empty 1D array, got shape {r.shape}")
         object.__setattr__(self, "ranges", r)
         for name in ("angle_min", "angle_increment", "range_min", "range_max", "timestamp"):
-            if not np.isfinite(getattr(self, name)):
-                raise FrameError(f"{name} is not finite")
+            _check_scalar(getattr(self, name), name)
         if self.angle_increment == 0:
             raise FrameError("angle_increment must be non-zero")
         if not 0 <= self.range_min < self.range_max:

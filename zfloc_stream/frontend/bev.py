@@ -4,7 +4,10 @@ Plane frame: the gravity-aligned odometry frame (gravity.py; for 2D lasers the o
 plane itself). Per cell the grid keeps
   - log-odds occupancy: + logodds_hit for a cell holding an obstacle point, + logodds_free
     for a cell crossed by a ray (each at most once per frame), clamped;
-  - wall evidence: number of frames that put a (refined) wall point / laser hit there.
+  - wall evidence: number of frames that put a (refined) wall point / laser hit there,
+    and hits: number of frames that put any obstacle point there. A wall cell needs
+    wall evidence in at least wall_min_ratio of the frames that hit it: furniture
+    mislabelled as wall passes the wall mask only from a few viewpoints.
 
 Free space is ray cast in 2D: per frame the rays from the sensor's plane position to its
 observed points form a star-shaped polygon (one vertex per laser beam, or per azimuth bin
@@ -51,6 +54,7 @@ class _ScrollingGrid:
         self.ix0 = self.iy0 = None
         self.logodds = np.zeros((n, n), dtype=np.float32)
         self.wall = np.zeros((n, n), dtype=np.uint16)
+        self.hits = np.zeros((n, n), dtype=np.uint16)
 
     def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
         cx, cy = (int(np.floor(v / self.res)) for v in xy)
@@ -63,6 +67,7 @@ class _ScrollingGrid:
             return
         self.logodds = _shifted(self.logodds, dy, dx)
         self.wall = _shifted(self.wall, dy, dx)
+        self.hits = _shifted(self.hits, dy, dx)
         self.ix0 += dx
         self.iy0 += dy
 
@@ -159,14 +164,18 @@ class RollingBEV:
         """Bytes held by the grid, buffers and trajectory (for the flat-memory check)."""
         pending = sum(f.depth.nbytes + (0 if f.labels is None else f.labels.nbytes) for f in self._pending)
         rays = sum(r.nbytes for r in self._ray_cache.values())
-        return self.grid.logodds.nbytes + self.grid.wall.nbytes + pending + rays + self._trajectory.nbytes + self.gravity._points.nbytes
+        return self.grid.logodds.nbytes + self.grid.wall.nbytes + self.grid.hits.nbytes + pending + rays + self._trajectory.nbytes + self.gravity._points.nbytes
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
         b = self.settings.bev
         g = self.grid
         if g.ix0 is None:
             raise InputError("BEV is empty: no frame fused yet")
-        wall = (g.wall >= b.wall_min_observations) & (g.logodds > b.occupied_threshold)
+        wall = (
+            (g.wall >= b.wall_min_observations)
+            & (g.wall >= b.wall_min_ratio * g.hits)  # mostly seen as wall, not as clutter
+            & (g.logodds > b.occupied_threshold)
+        )
         if not wall.any():
             raise InputError("BEV has no wall points yet")
         known = (g.logodds != 0) | (g.wall > 0)
@@ -337,9 +346,14 @@ class RollingBEV:
                 region[free] = np.maximum(region[free] + b.logodds_free, b.logodds_min)
         flat_lo = g.logodds.reshape(-1)
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
-        wall_flat = g.unique_flat(wall_hits)
-        flat_wall = g.wall.reshape(-1)
-        flat_wall[wall_flat] = np.minimum(flat_wall[wall_flat].astype(np.int64) + 1, np.iinfo(np.uint16).max)
+        _increment(g.hits, hit_flat)
+        _increment(g.wall, g.unique_flat(wall_hits))
+
+
+def _increment(counts: np.ndarray, flat: np.ndarray) -> None:
+    """counts.flat[flat] += 1, saturating (uint16)."""
+    view = counts.reshape(-1)
+    view[flat] = np.minimum(view[flat].astype(np.int64) + 1, np.iinfo(counts.dtype).max)
 
 
 def _extract_primitives(points: np.ndarray, settings: Settings, rng: np.random.Generator):
