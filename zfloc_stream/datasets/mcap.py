@@ -1,0 +1,62 @@
+"""Recorded MCAP sessions (ours or another tool's on the DESIGN.md topics):
+`mcap:/runs/a.mcap,/runs/b.mcap`.
+
+Frames, their ground truth (/groundtruth/pose, NaN where absent) and the floorplan come
+from the file; a session that carries no floorplan uses `map.yaml` beside it when there
+is one. Laser sessions get a fixed scale (a laser measures metres). The session is read
+once up front to count its frames and collect the ground truth.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Settings
+from ..errors import InputError
+from ..frames import LaserFrame
+from .base import Sequence, register
+
+SIBLING_FLOORPLAN = "map.yaml"
+
+
+def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
+    from ..floorplan import Floorplan
+    from ..session import read_session
+
+    path = Path(path)
+    session = read_session(path)
+    truth, laser = [], False
+    for frame in session.frames():
+        gt = frame.ground_truth
+        truth.append(np.full(3, np.nan) if gt is None else np.asarray(gt, dtype=float)[:3])
+        laser = laser or isinstance(frame, LaserFrame)
+    if not truth:
+        raise InputError(f"{path}: the session holds no input frame")
+
+    def frames(start: int, stop: int):
+        return read_session(path).frames(start, stop)
+
+    def load_floorplan():
+        if session.floorplan is not None:
+            return session.floorplan
+        sibling = path.parent / SIBLING_FLOORPLAN
+        if sibling.is_file():
+            return Floorplan.load(sibling, settings=settings)
+        raise InputError(f"{path} carries no floorplan and there is no {SIBLING_FLOORPLAN} beside it: pass --floorplan")
+
+    return Sequence(
+        name=path.stem if path.stem != "session" else path.parent.name,
+        frame_source=frames,
+        n_frames=len(truth),
+        ground_truth=np.array(truth),
+        floorplan=floorplan if floorplan is not None else load_floorplan,
+        settings_overrides={"estimator": {"scale_mode": "fixed"}} if laser else {},
+        source=f"mcap:{path}",
+    )
+
+
+@register("mcap")
+def load_mcap(args: str, settings: Settings) -> list[Sequence]:
+    return [session_sequence(p, settings) for p in args.split(",") if p]
