@@ -262,8 +262,9 @@ def angular_coverage_and_span(angles: np.ndarray, max_gap: float) -> tuple[float
     return coverage, span
 
 
-def _candidate_groups(pts: np.ndarray, settings: CircleSettings) -> np.ndarray:
-    """Indices of points in spatially separated groups small enough to be a pillar.
+def _candidate_groups(pts: np.ndarray, settings: CircleSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(indices, group labels) of the points in spatially separated groups small enough to
+    be a pillar.
 
     Groups are connected components at link distance `group_link_distance`; a group wider
     than a pillar of max_radius (a wall, a room) cannot hold an isolated circle, so it is
@@ -280,7 +281,8 @@ def _candidate_groups(pts: np.ndarray, settings: CircleSettings) -> np.ndarray:
     count = np.bincount(label)
     width = (hi - lo).max(axis=1)
     small = (width <= 2 * settings.max_radius + 2 * settings.inlier_distance) & (count >= settings.min_cluster_size)
-    return np.flatnonzero(small[label])
+    keep = np.flatnonzero(small[label])
+    return keep, label[keep]
 
 
 def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) -> CircleSet:
@@ -288,7 +290,7 @@ def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) 
     pts = as_points(points)
     if len(pts) < settings.min_cluster_size:
         return CircleSet.empty()
-    keep = _candidate_groups(pts, settings)
+    keep, group = _candidate_groups(pts, settings)
     if len(keep) < settings.min_cluster_size:
         return CircleSet.empty()
     sub = pts[keep]
@@ -301,11 +303,20 @@ def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) 
     ).fit_predict(sub)
     centres, radii = [], []
     for k in range(labels.max() + 1):
-        cluster = sub[labels == k]
+        in_cluster = labels == k
+        cluster = sub[in_cluster]
         width = (cluster.max(axis=0) - cluster.min(axis=0)).max()
         if width > 2 * settings.max_radius + 2 * settings.inlier_distance:
             continue
-        circle = _circle_in_cluster(cluster, settings, rng)
+        # The circle is judged against the whole isolated structure the cluster belongs
+        # to: HDBSCAN may cut the rounded-looking corner out of an L-shaped wall piece, and
+        # only the rest of that piece shows it is not a pillar.
+        in_groups = np.isin(group, np.unique(group[in_cluster]))
+        context = sub[in_groups]
+        # HDBSCAN calls the sparse part of a short arc noise; those points still belong to
+        # the pillar, so the fit sees the cluster plus the noise of its own groups.
+        work = sub[in_cluster | (in_groups & (labels < 0))]
+        circle = _circle_in_cluster(work, context, settings, rng)
         if circle is not None:
             centres.append(circle[0])
             radii.append(circle[1])
@@ -314,7 +325,9 @@ def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) 
     return CircleSet(np.array(centres), np.array(radii))
 
 
-def _circle_in_cluster(p: np.ndarray, s: CircleSettings, rng: np.random.Generator):
+def _circle_in_cluster(p: np.ndarray, context: np.ndarray, s: CircleSettings, rng: np.random.Generator):
+    """RANSAC + refit a circle on the points p; accept it only if it explains the
+    context points (radius, inlier ratio, angular coverage and continuity)."""
     m = len(p)
     idx = rng.integers(0, m, size=(s.ransac_iterations, 3))
     centres, radii = _circles_through(p[idx[:, 0]], p[idx[:, 1]], p[idx[:, 2]])
@@ -333,10 +346,51 @@ def _circle_in_cluster(p: np.ndarray, s: CircleSettings, rng: np.random.Generato
         inliers = np.abs(np.linalg.norm(p - c, axis=1) - r) <= s.inlier_distance
     if not (np.isfinite(r) and s.min_radius <= r <= s.max_radius):
         return None
-    if inliers.sum() < s.min_cluster_size or inliers.mean() < s.min_inlier_ratio:
+    on_circle = np.abs(np.linalg.norm(context - c, axis=1) - r) <= s.inlier_distance
+    if on_circle.sum() < s.min_cluster_size or on_circle.mean() < s.min_inlier_ratio:
         return None
-    q = p[inliers] - c
-    coverage, span = angular_coverage_and_span(np.arctan2(q[:, 1], q[:, 0]), np.deg2rad(s.max_gap_deg))
+    q = context[on_circle] - c
+    angles = np.arctan2(q[:, 1], q[:, 0])
+    coverage, span = angular_coverage_and_span(angles, np.deg2rad(s.max_gap_deg))
     if coverage < np.deg2rad(s.min_coverage_deg) or span < np.deg2rad(s.min_span_deg):
         return None
+    # A corner (two straight legs) can hug a circle within the inlier band; a pillar
+    # cannot be followed by two straight pieces. Reject when two lines fit the arc's
+    # points, taken in angular order, at least as well as the circle does.
+    arc_pts = context[on_circle][_angular_order(angles)]
+    circle_sse = float(np.sum((np.linalg.norm(arc_pts - c, axis=1) - r) ** 2))
+    if _best_two_line_sse(arc_pts) <= circle_sse:
+        return None
     return c, r
+
+
+def _angular_order(angles: np.ndarray) -> np.ndarray:
+    """Order of the angles read counter-clockwise starting after their largest gap, so an
+    open arc is one unbroken sequence."""
+    order = np.argsort(angles)
+    a = angles[order]
+    gaps = np.diff(np.concatenate([a, [a[0] + 2 * np.pi]]))
+    return np.roll(order, -(int(np.argmax(gaps)) + 1))
+
+
+def _best_two_line_sse(p: np.ndarray, min_part: int = 3) -> float:
+    """Smallest total squared orthogonal residual of two lines fitted to a prefix and the
+    remaining suffix of the ordered points p (all split points at once via cumulative sums)."""
+    n = len(p)
+    if n < 2 * min_part:
+        return np.inf
+    q = p - p.mean(axis=0)  # centred: keeps the cumulative sums well conditioned
+    x, y = q[:, 0], q[:, 1]
+    terms = np.stack([np.ones(n), x, y, x * x, x * y, y * y], axis=1)
+    total = terms.sum(axis=0)
+    prefix = np.cumsum(terms, axis=0)[min_part - 1 : n - min_part]  # prefix of k points, k = min_part .. n - min_part
+    suffix = total - prefix
+
+    def sse(m):
+        cnt, sx, sy, sxx, sxy, syy = m.T
+        a = sxx - sx * sx / cnt
+        b = sxy - sx * sy / cnt
+        d = syy - sy * sy / cnt
+        return np.maximum(0.5 * (a + d) - np.sqrt(0.25 * (a - d) ** 2 + b * b), 0.0)
+
+    return float(np.min(sse(prefix) + sse(suffix)))
