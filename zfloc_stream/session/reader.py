@@ -81,6 +81,7 @@ class FrameRecord:
     stamp_ns: int
     frame: CameraFrame | LaserFrame
     outputs: LoggedOutputs
+    inputs: dict = field(default_factory=dict)  # input topic -> (decoded message, channel metadata)
 
 
 @dataclass
@@ -131,25 +132,31 @@ class Session:
 
     @property
     def floorplan(self):
-        """The embedded floorplan (Floorplan), or None when the file carries none."""
+        """The embedded floorplan built with the logged settings (None when the file
+        carries none)."""
         if self._floorplan is None and self.floorplan_files:
-            self._floorplan = self._load_floorplan()
+            self._floorplan = self.load_floorplan(self.settings)
         return self._floorplan
 
-    def _load_floorplan(self):
+    def load_floorplan(self, settings: Settings | None = None):
+        """The embedded floorplan built with the given settings, or None."""
         from ..floorplan import Floorplan  # the floorplan stage is only needed here
 
         files = self.floorplan_files
+        if not files:
+            return None
         yamls = [n for n in files if n.endswith((".yaml", ".yml"))]
-        if len(yamls) != 1 or any("/" in n or n.startswith(".") for n in files):
+        if len(yamls) != 1 or any("/" in n or "\\" in n or n.startswith(".") for n in files):
             raise SessionLogError(f"{self.path}: floorplan attachments {sorted(files)} must hold one YAML and plain file names")
         with tempfile.TemporaryDirectory(prefix="zfloc-session-") as tmp:
-            for name, data in files.items():
-                (Path(tmp) / name).write_bytes(data)
             try:
-                return Floorplan.load(Path(tmp) / yamls[0])
+                for name, data in files.items():
+                    (Path(tmp) / name).write_bytes(data)
+                return Floorplan.load(Path(tmp) / yamls[0], settings=settings)
             except ZflocError as err:
                 raise SessionLogError(f"{self.path}: embedded floorplan is unusable: {err}") from None
+            except (OSError, ValueError) as err:  # names or bytes damaged in the file
+                raise SessionLogError(f"{self.path}: embedded floorplan cannot be extracted ({err})") from None
 
     # --- frames -----------------------------------------------------------------------------
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[CameraFrame | LaserFrame]:
@@ -211,7 +218,8 @@ class Session:
         except SessionLogError as err:
             self._fail(f"frame at {where}: {err}")
             return None
-        return FrameRecord(index, stamp, frame, outputs)
+        inputs = {t: parts[t] for t in S.INPUT_TOPICS if t in parts}
+        return FrameRecord(index, stamp, frame, outputs, inputs)
 
     # --- records and messages ---------------------------------------------------------------
     def _fail(self, what: str) -> None:

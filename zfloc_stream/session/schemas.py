@@ -381,13 +381,19 @@ def encode_status(status: dict) -> bytes:
     return json.dumps(status, allow_nan=False, separators=(",", ":")).encode()
 
 
+def _reject_constant(name: str):
+    raise SessionLogError(f"status JSON holds {name}, which JSON does not allow (NaN is written as null)")
+
+
 def decode_status(data: bytes) -> dict:
+    """Parse and validate a /zfloc/status payload (it must describe an Estimate)."""
     try:
-        status = json.loads(data)
-    except (UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise SessionLogError(f"status is not valid JSON ({err})") from None
+        status = json.loads(data, parse_constant=_reject_constant)
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+        raise SessionLogError(f"status is not valid JSON ({type(err).__name__})") from None
     if not isinstance(status, dict) or not {"frame", "timestamp", "status"} <= status.keys():
         raise SessionLogError("status JSON lacks frame, timestamp or status")
+    estimate_from_status(status)  # raises on a malformed field
     return status
 
 
@@ -401,6 +407,8 @@ def _sim2(d: dict | None) -> Sim2 | None:
 
 def estimate_from_status(status: dict) -> Estimate:
     """The Estimate a status message describes (for consumers of logged sessions)."""
+    if status.get("status") not in STATUSES:
+        raise SessionLogError(f"status JSON: unknown status {status.get('status')!r}")
     try:
         pose = None if status.get("pose") is None else np.array([_f(v) for v in status["pose"]])
         cov = None if status.get("covariance") is None else np.array([_f(v) for v in status["covariance"]]).reshape(3, 3)
@@ -420,7 +428,7 @@ def estimate_from_status(status: dict) -> Estimate:
             {str(k): float(v) for k, v in (status.get("timings") or {}).items()},
             status.get("skipped"),
         )
-    except (KeyError, TypeError, ValueError, AttributeError) as err:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
         raise SessionLogError(f"status JSON is malformed ({type(err).__name__}: {err})") from None
 
 

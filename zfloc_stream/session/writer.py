@@ -21,6 +21,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+import numpy as np
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
@@ -33,26 +34,38 @@ from ..frames import CameraFrame, LaserFrame
 from . import schemas as S
 from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
 
+_OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _MEDIA_TYPES = {".yaml": "application/yaml", ".yml": "application/yaml", ".png": "image/png", ".pgm": "image/x-portable-graymap"}
 
 
 def bev_grid_of(source) -> S.BevGrid | None:
-    """The BEV layer to publish, from a BevGrid, a RollingBEV or a Localizer (duck-typed:
-    an object with `log_odds_grid() -> (values, origin, resolution)`, or its `.bev`)."""
-    if source is None or isinstance(source, S.BevGrid):
-        return source
+    """The BEV layer to publish, cropped to its observed cells, from a BevGrid, a
+    RollingBEV or a Localizer (its `.bev`). A BEV exposes `log_odds_grid() -> (values,
+    origin, resolution)`, or else its scrolling `grid` (logodds, ix0, iy0, res) is read."""
+    if source is None:
+        return None
     bev = getattr(source, "bev", source)
     getter = getattr(bev, "log_odds_grid", None)
-    if getter is None:
+    if isinstance(source, S.BevGrid):
+        values, origin, resolution = source.values, source.origin, source.resolution
+    elif getter is not None:
+        out = getter()
+        if out is None:
+            return None
+        values, origin, resolution = out
+    else:
+        g = getattr(bev, "grid", None)
+        if g is None or getattr(g, "ix0", None) is None:
+            return None
+        values, origin, resolution = g.logodds, (g.ix0 * g.res, g.iy0 * g.res), g.res
+    values = np.asarray(values, dtype=np.float32)
+    rows, cols = np.nonzero((values != 0).any(axis=1))[0], np.nonzero((values != 0).any(axis=0))[0]
+    if rows.size == 0:
         return None
-    out = getter()
-    if out is None:
-        return None
-    values, origin, resolution = out
-    if getattr(values, "size", 0) == 0:
-        return None
-    return S.BevGrid(values, origin, float(resolution))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    origin = np.asarray(origin, dtype=float) + np.array([c0, r0]) * float(resolution)
+    return S.BevGrid(values[r0:r1, c0:c1], origin, float(resolution))
 
 
 class SessionWriter:
@@ -102,27 +115,53 @@ class SessionWriter:
     # --- inputs -------------------------------------------------------------------------
     def write_frame(self, index: int, frame: CameraFrame | LaserFrame) -> CameraFrame | LaserFrame:
         """Log one input frame; returns it as a reader will rebuild it (push that one)."""
+        if not isinstance(frame, CameraFrame | LaserFrame):
+            raise SessionLogError(f"cannot log a {type(frame).__name__}: expected CameraFrame or LaserFrame")
+        ns = self._begin_frame(index, frame.timestamp)
+        if isinstance(frame, CameraFrame):
+            logged = self._write_camera(index, frame, ns)
+        else:
+            logged = self._write_laser(index, frame, ns)
+        self._end_frame(logged.timestamp, ns)
+        return logged
+
+    def copy_frame(self, record) -> None:
+        """Log a frame read from a session (a reader FrameRecord) by copying its input
+        messages as they are, so the new file replays exactly like the old one."""
+        frame = record.frame
+        ns = self._begin_frame(record.index, frame.timestamp, record.stamp_ns)
+        axis = "z" if isinstance(frame, CameraFrame) else "x"
+        defaults = {
+            S.TOPIC_ODOMETRY: {S.HEADING_AXIS_KEY: axis},
+            S.TOPIC_GROUND_TRUTH: {S.HEADING_AXIS_KEY: axis},
+        }
+        if isinstance(frame, LaserFrame):
+            defaults[S.TOPIC_SCAN] = {S.RANGE_MIN_KEY: repr(float(frame.range_min)), S.RANGE_MAX_KEY: repr(float(frame.range_max))}
+        for topic in S.INPUT_TOPICS:
+            if topic in record.inputs:
+                msg, meta = record.inputs[topic]
+                ours = _OUR_CLASSES[msg.DESCRIPTOR.full_name].FromString(msg.SerializeToString())
+                self._write(topic, ours, ns, record.index, {**meta, **defaults.get(topic, {})})
+        self._end_frame(frame.timestamp, ns)
+
+    def _begin_frame(self, index: int, timestamp: float, ns: int | None = None) -> int:
         self._check_open()
-        ns = S.seconds_to_ns(frame.timestamp)
+        ns = S.seconds_to_ns(timestamp) if ns is None else ns
         if self._last_frame is not None and ns <= self._last_frame[1]:
             raise SessionLogError(
-                f"{self.path}: frame {index} timestamp {frame.timestamp} is not after the previous frame's: "
+                f"{self.path}: frame {index} timestamp {timestamp} is not after the previous frame's: "
                 "a session needs strictly increasing timestamps"
             )
         if self._frames_in_chunk >= self._cfg.chunk_max_frames:
             self._mcap.flush()  # close the chunk: bounds what a crash can lose
             self._frames_in_chunk = 0
-        if isinstance(frame, CameraFrame):
-            logged = self._write_camera(index, frame, ns)
-        elif isinstance(frame, LaserFrame):
-            logged = self._write_laser(index, frame, ns)
-        else:
-            raise SessionLogError(f"cannot log a {type(frame).__name__}: expected CameraFrame or LaserFrame")
-        self._last_frame = (logged.timestamp, ns)
+        return ns
+
+    def _end_frame(self, timestamp: float, ns: int) -> None:
+        self._last_frame = (timestamp, ns)
         self._frames_in_chunk += 1
         self.frames_written += 1
         self._file.flush()
-        return logged
 
     def _write_camera(self, index: int, frame: CameraFrame, ns: int) -> CameraFrame:
         h, w = frame.depth.shape

@@ -1,0 +1,272 @@
+"""Replay: re-run the engine on a session's logged inputs.
+
+With check=True every logged output (pose, hypotheses, BEV grid, status without its
+timings) is compared with the re-run, frame by frame; the first difference is returned as
+a Divergence. The localizer is deterministic, so a session replayed with its own settings
+must match bit for bit.
+
+Frame range: frames start <= index < stop. With check=True the engine first runs through
+frames 0..start-1 unchecked (its state at `start` must be the logged one); without check
+a fresh engine starts at `start` (to study a segment on its own).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..config import Settings, _dotted_to_nested, _merge, settings_from_dict
+from ..errors import ConfigError, SessionLogError
+from ..estimate import Estimate
+from . import schemas as S
+from .reader import FrameRecord, LoggedOutputs, Session
+from .writer import SessionWriter, bev_grid_of
+
+
+@dataclass(frozen=True)
+class Divergence:
+    frame: int
+    topic: str
+    field: str
+    logged: object
+    replayed: object
+
+    def __str__(self) -> str:
+        return f"frame {self.frame}, {self.topic}: {self.field}: logged {self.logged!r}, replay {self.replayed!r}"
+
+
+@dataclass
+class RunSummary:
+    """Per run: how many frames had a pose, the final status, errors where ground truth
+    is known, and the mean wall time per frame (total and per stage)."""
+
+    frames: int = 0
+    with_pose: int = 0
+    final_status: str = "-"
+    success: bool | None = None  # every one of the last frames within the success distance
+    mean_error: float | None = None  # m, over frames with a pose and ground truth
+    final_error: float | None = None  # m, last frame (inf: no pose)
+    mean_time: float | None = None  # s per frame, sum of the stage timings
+    mean_timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class ReplayResult:
+    frames: int  # frames replayed (in the requested range)
+    checked: int  # frames whose logged outputs were compared
+    divergence: Divergence | None
+    estimates: list[Estimate]
+    logged: RunSummary
+    replayed: RunSummary
+    out: Path | None = None
+
+
+# --- settings -------------------------------------------------------------------------------
+def replay_settings(session: Session, config: str | Path | None = None, overrides: list[str] | None = None) -> Settings:
+    """The session's logged settings (defaults if it has none), then a YAML file, then
+    dotted.key=value overrides."""
+    base = session.settings or Settings()
+    data = base.model_dump()
+    source = f"{session.path} (logged settings)"
+    if config is not None:
+        path = Path(config)
+        try:
+            loaded = yaml.safe_load(path.read_text()) or {}
+        except FileNotFoundError:
+            raise ConfigError(f"config file not found: {path}") from None
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+            raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"{path}: top level must be a mapping")
+        data = _merge(data, loaded)
+        source = f"{source} + {path}"
+    for item in overrides or []:
+        if "=" not in item:
+            raise ConfigError(f"override '{item}' must look like dotted.key=value")
+        key, raw = item.split("=", 1)
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            raise ConfigError(f"override '{item}': value is not valid YAML") from None
+        data = _merge(data, _dotted_to_nested(key.strip(), value))
+        source = f"{source} + overrides"
+    return settings_from_dict(data, source)
+
+
+# --- comparison -----------------------------------------------------------------------------
+def _flatten(value, prefix: str = "") -> dict[str, object]:
+    """Nested protobuf messages / dicts / lists as {dotted.path: leaf}."""
+    if hasattr(value, "ListFields"):
+        out: dict[str, object] = {}
+        for desc in value.DESCRIPTOR.fields:  # every field, set or not: a missing one is 0
+            v = getattr(value, desc.name)
+            key = f"{prefix}{desc.name}"
+            if desc.label == desc.LABEL_REPEATED:
+                out[key + ".len"] = len(v)
+                for i, item in enumerate(v):
+                    out.update(_flatten(item, f"{key}[{i}]."))
+            elif desc.message_type is not None:
+                out.update(_flatten(v, key + "."))
+            else:
+                out[key] = v
+        return out
+    if isinstance(value, dict):
+        out = {}
+        for k in sorted(value):
+            out.update(_flatten(value[k], f"{prefix}{k}."))
+        return out
+    if isinstance(value, list):
+        out = {f"{prefix}len": len(value)}
+        for i, item in enumerate(value):
+            out.update(_flatten(item, f"{prefix}[{i}]."))
+        return out
+    return {prefix.rstrip("."): value}
+
+
+def _first_difference(logged, replayed) -> tuple[str, object, object] | None:
+    a, b = _flatten(logged), _flatten(replayed)
+    for key in sorted(a.keys() | b.keys()):
+        va, vb = a.get(key, "<absent>"), b.get(key, "<absent>")
+        if isinstance(va, bytes) or isinstance(vb, bytes):
+            if va != vb:
+                return key, _describe_bytes(va), _describe_bytes(vb)
+        elif type(va) is not type(vb) or va != vb:
+            if not (isinstance(va, float) and isinstance(vb, float) and np.isnan(va) and np.isnan(vb)):
+                return key, va, vb
+    return None
+
+
+def _describe_bytes(v) -> str:
+    return f"<{len(v)} bytes>" if isinstance(v, bytes) else repr(v)
+
+
+def _comparable_status(status: dict) -> dict:
+    # timings are wall-clock measurements; the JSON round trip makes both sides alike
+    return {k: v for k, v in json.loads(S.encode_status(status)).items() if k not in S.MEASURED_STATUS_KEYS}
+
+
+def compare_outputs(index: int, ns: int, logged: LoggedOutputs, est: Estimate, bev_source, settings: Settings) -> Divergence | None:
+    """The first difference between what was logged for a frame and the re-run."""
+    diff = _first_difference(_comparable_status(logged.status), _comparable_status(S.status_to_json(est)))
+    if diff is not None:
+        return Divergence(index, S.TOPIC_STATUS, *diff)
+    replay_pose = None if est.pose is None else S.estimate_pose_to_msg(est, ns)
+    if (logged.pose is None) != (replay_pose is None):
+        return Divergence(index, S.TOPIC_POSE, "present", logged.pose is not None, replay_pose is not None)
+    if replay_pose is not None:
+        diff = _first_difference(logged.pose, replay_pose)
+        if diff is not None:
+            return Divergence(index, S.TOPIC_POSE, *diff)
+    if logged.hypotheses is not None:
+        diff = _first_difference(logged.hypotheses, S.hypotheses_to_msg(est, ns))
+        if diff is not None:
+            return Divergence(index, S.TOPIC_HYPOTHESES, *diff)
+    if logged.bev is not None:
+        grid = bev_grid_of(bev_source)
+        if grid is None:
+            return Divergence(index, S.TOPIC_BEV, "present", True, False)
+        diff = _first_difference(logged.bev, S.grid_to_msg(grid, ns))
+        if diff is not None:
+            return Divergence(index, S.TOPIC_BEV, *diff)
+    return None
+
+
+# --- summaries ------------------------------------------------------------------------------
+def summarize_run(estimates: list[Estimate | None], truth: list, settings: Settings) -> RunSummary:
+    from ..metrics import is_success, position_errors
+
+    cfg = settings.logging
+    done = [e for e in estimates if e is not None]
+    out = RunSummary(frames=len(done))
+    if not done:
+        return out
+    out.with_pose = sum(e.pose is not None for e in done)
+    out.final_status = done[-1].status
+    totals = [sum(e.timings.values()) for e in done if e.timings]
+    if totals:
+        out.mean_time = float(np.mean(totals))
+        stages = sorted({k for e in done for k in e.timings})
+        out.mean_timings = {k: float(np.mean([e.timings.get(k, 0.0) for e in done])) for k in stages}
+    if len(done) == len(estimates) and truth and all(t is not None for t in truth):
+        err = position_errors([e.pose for e in done], np.asarray(truth, dtype=float))
+        finite = err[np.isfinite(err)]
+        out.mean_error = float(finite.mean()) if finite.size else None
+        out.final_error = float(err[-1])
+        out.success = is_success(err, cfg.success_distance, cfg.success_last_frames)
+    return out
+
+
+# --- replay ---------------------------------------------------------------------------------
+def replay_session(
+    session: Session,
+    settings: Settings,
+    floorplan,
+    start: int = 0,
+    stop: int | None = None,
+    check: bool = False,
+    out: str | Path | None = None,
+    on_frame: Callable[[int], None] | None = None,
+) -> ReplayResult:
+    """Re-run the localizer on frames start <= index < stop (see the module docstring)."""
+    from ..localizer import Localizer  # the engine is only needed here
+
+    if start < 0 or (stop is not None and stop <= start):
+        raise SessionLogError(f"empty frame range: from {start} to {stop}")
+    localizer = Localizer(floorplan, settings)
+    writer = None
+    if out is not None:
+        info = {"replay_of": str(session.path), "frames_from": str(start), "frames_to": "end" if stop is None else str(stop)}
+        writer = SessionWriter(out, settings, floorplan, metadata=info)
+    estimates: list[Estimate] = []
+    logged: list[Estimate | None] = []
+    truth: list = []
+    divergence = None
+    checked = 0
+    frames = 0
+    try:
+        for rec in session.records(0 if check else start, stop):
+            in_range = rec.index >= start
+            est = _push(localizer, writer, rec, in_range)
+            if on_frame is not None:
+                on_frame(rec.index)
+            if not in_range:
+                continue
+            frames += 1
+            estimates.append(est)
+            logged.append(rec.outputs.estimate)
+            truth.append(rec.frame.ground_truth)
+            if check and rec.outputs.status is not None:
+                checked += 1
+                divergence = compare_outputs(rec.index, rec.stamp_ns, rec.outputs, est, localizer, settings)
+                if divergence is not None:
+                    break
+    finally:
+        if writer is not None:
+            writer.close()
+    if frames == 0:
+        raise SessionLogError(f"{session.path}: no frame in the requested range (from {start} to {stop if stop is not None else 'end'})")
+    if check and checked == 0:
+        raise SessionLogError(f"{session.path}: nothing to check: the session holds no logged outputs ({S.TOPIC_STATUS})")
+    return ReplayResult(
+        frames=frames,
+        checked=checked,
+        divergence=divergence,
+        estimates=estimates,
+        logged=summarize_run(logged, truth, session.settings or settings),
+        replayed=summarize_run(estimates, truth, settings),
+        out=None if out is None else Path(out),
+    )
+
+
+def _push(localizer, writer: SessionWriter | None, rec: FrameRecord, log: bool) -> Estimate:
+    if writer is None or not log:
+        return localizer.push(rec.frame)
+    writer.copy_frame(rec)  # the logged messages as they are: the new file replays the same bits
+    est = localizer.push(rec.frame)
+    writer.write_estimate(est, localizer)
+    return est
