@@ -157,3 +157,23 @@ def plane_to_world(bev, T_odom_world: np.ndarray):
         return (np.asarray(xy, dtype=float) - b[:2]) @ A_inv.T
 
     return apply
+
+
+def world_to_plane(bev, T_odom_world: np.ndarray):
+    """2D map world xy (on the floor) -> BEV plane xy."""
+    M = bev.gravity.R_plane_odom @ T_odom_world[:3, :3]
+    b = bev.gravity.R_plane_odom @ T_odom_world[:3, 3]
+
+    def apply(xy):
+        xy = np.asarray(xy, dtype=float)
+        return xy @ M[:2, :2].T + b[:2]
+
+    return apply
+
+
+def world_points(depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> np.ndarray:
+    """(H, W, 3) world coordinates of every pixel of a depth image."""
+    h, w = depth.shape
+    v, u = np.mgrid[0:h, 0:w]
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T
+    return (rays * depth[..., None]) @ T_world_cam[:3, :3].T + T_world_cam[:3, 3]

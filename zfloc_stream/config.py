@@ -142,11 +142,10 @@ class WallMaskSettings(Section):
 class LabellerSettings(Section):
     """Geometric labeller for frames without labels (gravity frame, depth normals)."""
 
-    floor_tolerance: float = 0.08  # m, |height above floor| below this (and normal up): floor
+    floor_tolerance: float = 0.08  # m, |height above floor| below this (and not vertical): floor
     vertical_normal_max_z: float = 0.35  # |n_z| below this: a vertical surface
-    horizontal_normal_min_z: float = 0.85  # |n_z| above this: a horizontal surface
     wall_min_height: float = 0.3  # m above floor, lower vertical surfaces are clutter ("other")
-    ceiling_min_height: float = 1.8  # m above floor, horizontal surfaces higher than this: ceiling
+    ceiling_min_height: float = 1.8  # m above floor, non-vertical surfaces higher than this: ceiling
     normal_step: int = 2  # px, finite-difference step for depth normals
     max_tilt_deg: float = 35.0  # bootstrap: floor normal within this of the camera's up axis
     bootstrap_min_below: float = 0.5  # m, bootstrap floor candidates lie this far below the camera

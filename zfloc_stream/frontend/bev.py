@@ -228,13 +228,13 @@ class RollingBEV:
             self._fuse_camera(frame)
             return
         self._feed_gravity(frame)
+        if len(self._pending) >= max(self.settings.frontend.gravity.max_pending_frames, 1):
+            self._pending.popleft()  # bounded: the oldest waiting frame is given up
+            self.frames_dropped += 1
         self._pending.append(frame)
         if self.gravity.ready:
             while self._pending:
                 self._fuse_camera(self._pending.popleft())
-        elif len(self._pending) > self.settings.frontend.gravity.max_pending_frames:
-            self._pending.popleft()
-            self.frames_dropped += 1
 
     def _strided(self, frame: CameraFrame):
         """Every stride-th pixel: depth, labels, K of that sub-image, unit-depth rays."""

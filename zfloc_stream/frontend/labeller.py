@@ -2,8 +2,8 @@
 
 Works on an organised point cloud (the strided depth image back-projected) in the
 gravity-aligned plane frame, with the floor height known:
-  floor   - within floor_tolerance of the floor height, surface horizontal (or normal unknown)
-  ceiling - horizontal surface higher than ceiling_min_height above the floor
+  floor   - within floor_tolerance of the floor height, surface not vertical
+  ceiling - any non-vertical surface higher than ceiling_min_height above the floor
   wall    - vertical surface higher than wall_min_height above the floor
   other   - every other valid point (furniture tops, clutter, slanted surfaces)
 Walls found this way still go through the wall-mask refinement, which removes most
@@ -26,33 +26,28 @@ _MAX_EDGE_RATIO = 0.25
 
 
 def depth_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
-    """Unit normals (H, W, 3) of an organised point cloud (any frame) from central
-    differences over `step` pixels; NaN where a neighbour is missing or lies across a depth
-    edge (farther than a fraction of the depth). The sign is arbitrary: callers use |n_z|."""
+    """Unit normals (H, W, 3) of an organised point cloud (any frame) from differences over
+    `step` pixels (central inside, one-sided at the image border, so borders keep their
+    normals); NaN where a neighbour is missing or lies across a depth edge (farther than a
+    fraction of the depth). The sign is arbitrary: callers use |n_z|."""
     p = np.asarray(points, dtype=float)
     h, w, _ = p.shape
     s = max(int(step), 1)
     out = np.full((h, w, 3), np.nan)
-    if h <= 2 * s or w <= 2 * s:
+    if h < 2 or w < 2:
         return out
-    du = p[s:-s, 2 * s :] - p[s:-s, : -2 * s]
-    dv = p[2 * s :, s:-s] - p[: -2 * s, s:-s]
+    cols, rows = np.arange(w), np.arange(h)
+    right, left = np.minimum(cols + s, w - 1), np.maximum(cols - s, 0)
+    down, up = np.minimum(rows + s, h - 1), np.maximum(rows - s, 0)
+    du = p[:, right] - p[:, left]
+    dv = p[down] - p[up]
     n = np.cross(du, dv)
     norm = np.linalg.norm(n, axis=2)
-    scale = np.nan_to_num(np.asarray(depth, dtype=float)[s:-s, s:-s])
-    ok = (
-        valid[s:-s, s:-s]
-        & valid[s:-s, 2 * s :]
-        & valid[s:-s, : -2 * s]
-        & valid[2 * s :, s:-s]
-        & valid[: -2 * s, s:-s]
-        & (norm > 1e-12)
-    )
-    edge = _MAX_EDGE_RATIO * 2 * np.maximum(scale, 1e-6)
+    ok = valid & valid[:, right] & valid[:, left] & valid[down] & valid[up] & (norm > 1e-12)
+    # a neighbour pair spans at most 2 * step pixels: farther apart means a depth edge
+    edge = _MAX_EDGE_RATIO * 2 * np.maximum(np.nan_to_num(np.asarray(depth, dtype=float)), 1e-6)
     ok &= (np.linalg.norm(du, axis=2) < edge) & (np.linalg.norm(dv, axis=2) < edge)
-    inner = np.full((h - 2 * s, w - 2 * s, 3), np.nan)
-    inner[ok] = n[ok] / norm[ok, None]
-    out[s:-s, s:-s] = inner
+    out[ok] = n[ok] / norm[ok, None]
     return out
 
 
@@ -61,12 +56,13 @@ def label_frame(height: np.ndarray, normals: np.ndarray, valid: np.ndarray, sett
     nz = np.abs(normals[..., 2])
     has_normal = np.isfinite(nz)
     nz = np.nan_to_num(nz, nan=0.5)
-    horizontal = has_normal & (nz > settings.horizontal_normal_min_z)
     vertical = has_normal & (nz < settings.vertical_normal_max_z)
     labels = np.where(valid, OTHER, 0).astype(np.uint8)
     labels[valid & vertical & (height > settings.wall_min_height)] = WALL
-    labels[valid & horizontal & (height > settings.ceiling_min_height)] = CEILING
-    labels[valid & (horizontal | ~has_normal) & (np.abs(height) < settings.floor_tolerance)] = FLOOR
+    # above head height anything not vertical is ceiling (normals blur at ceiling corners)
+    labels[valid & has_normal & ~vertical & (height > settings.ceiling_min_height)] = CEILING
+    # at floor height anything not vertical is floor (normals blur where the floor meets walls)
+    labels[valid & ~vertical & (np.abs(height) < settings.floor_tolerance)] = FLOOR
     return labels
 
 
