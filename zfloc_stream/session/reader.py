@@ -110,6 +110,9 @@ class Session:
     def _parse_settings(self) -> Settings | None:
         if self.settings_yaml is None:
             return None
+        crc = self.metadata[S.METADATA_SETTINGS].get(S.CRC_KEY)
+        if crc is not None and crc != S.crc32_hex(self.settings_yaml.encode("utf-8", "surrogateescape")):
+            raise SessionLogError(f"{self.path}: logged settings are damaged (checksum mismatch)")
         try:
             data = yaml.safe_load(self.settings_yaml)
         except yaml.YAMLError:
@@ -145,6 +148,11 @@ class Session:
         files = self.floorplan_files
         if not files:
             return None
+        checksums = self.metadata.get(S.METADATA_CHECKSUMS, {})
+        for name, data in files.items():
+            crc = checksums.get(S.ATTACHMENT_FLOORPLAN_PREFIX + name)
+            if crc is not None and crc != S.crc32_hex(data):
+                raise SessionLogError(f"{self.path}: embedded floorplan file {name} is damaged (checksum mismatch)")
         yamls = [n for n in files if n.endswith((".yaml", ".yml"))]
         if len(yamls) != 1 or any("/" in n or "\\" in n or n.startswith(".") for n in files):
             raise SessionLogError(f"{self.path}: floorplan attachments {sorted(files)} must hold one YAML and plain file names")
@@ -387,7 +395,9 @@ def _records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
 def _describe(err: Exception, offset: int, size: int) -> str:
     name = type(err).__name__
     if name == "EndOfFile" or "unpack requires" in str(err):
-        return f"file is truncated (ends inside a record after byte {offset} of {size})"
+        if offset >= size:
+            return f"file is truncated (it ends at byte {size} without an MCAP footer: a recording cut off?)"
+        return f"file is truncated (it ends inside a record that starts at byte {offset} of {size})"
     if name == "InvalidMagic":
         return "not an MCAP file (bad magic bytes)"
     return f"damaged record near byte {offset} ({name}: {err})"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,11 +60,17 @@ RANGE_MAX_KEY = "range_max"
 # Metadata record names and attachment prefix inside a session file
 METADATA_SETTINGS = "zfloc/settings"  # {"yaml": dump_settings(...)}
 METADATA_SESSION = "zfloc/session"  # {"format": ..., "sensor": ..., user keys}
+METADATA_CHECKSUMS = "zfloc/checksums"  # {attachment name: crc32 hex}
+CRC_KEY = "crc32"  # in METADATA_SETTINGS: crc32 hex of the YAML text
 ATTACHMENT_FLOORPLAN_PREFIX = "floorplan/"
 SESSION_FORMAT = "zfloc-session/1"
 
 LABEL_ENCODINGS = ("mono8", "8UC1")
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
+
+
+def crc32_hex(data: bytes) -> str:
+    return f"{zlib.crc32(data):08x}"
 
 
 # --- time -----------------------------------------------------------------------------------

@@ -88,7 +88,8 @@ class SessionWriter:
         self._closed = False
         self.frames_written = 0
         # Settings and floorplan first, outside chunks: a truncated file still has them.
-        self._mcap.add_metadata(S.METADATA_SETTINGS, {"yaml": dump_settings(settings)})
+        text = dump_settings(settings)
+        self._mcap.add_metadata(S.METADATA_SETTINGS, {"yaml": text, S.CRC_KEY: S.crc32_hex(text.encode())})
         info = {"format": S.SESSION_FORMAT, "writer": f"zfloc-stream/{__version__}"}
         info.update({str(k): str(v) for k, v in (metadata or {}).items()})
         self._mcap.add_metadata(S.METADATA_SESSION, info)
@@ -256,11 +257,11 @@ class SessionWriter:
             files = sorted(p for p in Path(tmp).iterdir() if p.is_file())
             if not any(p.suffix in (".yaml", ".yml") for p in files):
                 raise SessionLogError("floorplan.write_ros wrote no YAML file: cannot embed the floorplan")
+            checksums = {}
             for p in files:
-                self._mcap.add_attachment(
-                    create_time=0,
-                    log_time=0,
-                    name=S.ATTACHMENT_FLOORPLAN_PREFIX + p.name,
-                    media_type=_MEDIA_TYPES.get(p.suffix, "application/octet-stream"),
-                    data=p.read_bytes(),
-                )
+                name, data = S.ATTACHMENT_FLOORPLAN_PREFIX + p.name, p.read_bytes()
+                media_type = _MEDIA_TYPES.get(p.suffix, "application/octet-stream")
+                self._mcap.add_attachment(create_time=0, log_time=0, name=name, media_type=media_type, data=data)
+                checksums[name] = S.crc32_hex(data)
+        # MCAP readers skip attachment CRCs: ours let read_session detect a damaged floorplan
+        self._mcap.add_metadata(S.METADATA_CHECKSUMS, checksums)

@@ -1,0 +1,101 @@
+"""Damaged session files never end in a traceback: every fault is a SessionLogError that
+names the file (or the damage changed only values and the file still reads)."""
+
+import numpy as np
+import pytest
+from session_helpers import camera_frames, laser_frames, write_fake_session
+
+from zfloc_stream.config import load_settings
+from zfloc_stream.errors import SessionLogError
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.session import read_session
+
+N_CASES = 520
+
+
+def _read_everything(path, salvage: bool, with_floorplan: bool) -> int:
+    session = read_session(path, salvage=salvage)
+    n = 0
+    for rec in session.records():
+        _ = rec.outputs.estimate, rec.outputs.bev_grid
+        n += 1
+    if with_floorplan:
+        _ = session.floorplan
+    return n
+
+
+@pytest.fixture(scope="module")
+def original(tmp_path_factory):
+    occ = np.zeros((12, 16), bool)
+    occ[[0, -1], :] = occ[:, [0, -1]] = True
+    plan = Floorplan.from_occupancy(occ, 0.1, (0.0, 0.0), name="tiny")
+    settings = load_settings(overrides=["logging.chunk_max_frames=2", "logging.compression=zstd"])
+    path = tmp_path_factory.mktemp("fuzz") / "small.mcap"
+    write_fake_session(path, camera_frames(4, seed=9, shape=(6, 8)), settings, floorplan=plan)
+    return path.read_bytes()
+
+
+def _mutate(data: bytes, rng: np.random.Generator) -> bytes:
+    buf = bytearray(data)
+    kind = rng.integers(3)
+    if kind in (0, 2):  # byte flips
+        for pos in rng.integers(0, len(buf), size=rng.integers(1, 4)):
+            buf[pos] ^= int(rng.integers(1, 256))
+    if kind in (1, 2):  # truncation
+        buf = buf[: int(rng.integers(0, len(buf)))]
+    return bytes(buf)
+
+
+def test_random_flips_and_truncations_fail_cleanly(original, tmp_path):
+    rng = np.random.default_rng(20240601)
+    path = tmp_path / "damaged.mcap"
+    outcomes = {"read": 0, "error": 0}
+    for case in range(N_CASES):
+        path.write_bytes(_mutate(original, rng))
+        salvage = case % 2 == 1
+        try:
+            _read_everything(path, salvage, with_floorplan=case % 10 == 0)
+            outcomes["read"] += 1
+        except SessionLogError as err:
+            msg = str(err)
+            assert str(path) in msg, f"case {case}: error does not name the file: {msg}"
+            assert "\n" not in msg.strip() and len(msg) > len(str(path)) + 5, f"case {case}: {msg!r}"
+            outcomes["error"] += 1
+    # both outcomes must occur, or the test is not exercising the damage paths
+    assert outcomes["read"] > 20 and outcomes["error"] > 100, outcomes
+
+
+def test_every_truncation_point_salvages_a_prefix(original, tmp_path):
+    """Cutting the file anywhere: a strict read refuses (file named), a salvage read
+    returns a prefix of the frames, growing with the cut."""
+    path = tmp_path / "cut.mcap"
+    full = _read_everything_bytes(original, tmp_path / "full.mcap")
+    counts = []
+    for cut in range(0, len(original) - 1, max(1, len(original) // 60)):
+        path.write_bytes(original[:cut])
+        with pytest.raises(SessionLogError, match="cut.mcap"):
+            _read_everything(path, salvage=False, with_floorplan=False)
+        try:
+            counts.append(_read_everything(path, salvage=True, with_floorplan=False))
+        except SessionLogError as err:
+            assert "cut.mcap" in str(err)
+            counts.append(0)
+    assert counts == sorted(counts) and counts[-1] >= full - 2 and counts[0] == 0
+
+
+def _read_everything_bytes(data: bytes, path) -> int:
+    path.write_bytes(data)
+    return _read_everything(path, salvage=False, with_floorplan=True)
+
+
+def test_laser_session_flips(tmp_path):
+    path = tmp_path / "laser.mcap"
+    write_fake_session(path, laser_frames(3, beams=20), load_settings(overrides=["logging.compression=none"]))
+    data = path.read_bytes()
+    rng = np.random.default_rng(5)
+    for _ in range(60):  # uncompressed chunks: flips land in message fields, not only zstd frames
+        path.write_bytes(_mutate(data, rng))
+        try:
+            _read_everything(path, salvage=False, with_floorplan=False)
+        except SessionLogError as err:
+            assert str(path) in str(err)
