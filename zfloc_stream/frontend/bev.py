@@ -39,8 +39,8 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..rng import make_rng
 from .gravity import GravityEstimator, plane_pose
-from .labeller import label_frame, bootstrap_floor_mask, depth_normals
-from .wallmask import refine_wall_mask, upright_rotation
+from .labeller import bootstrap_floor_mask, depth_normals, label_frame
+from .wallmask import refine_wall_points, upright_rotation
 
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
 
@@ -254,53 +254,55 @@ class RollingBEV:
                 self._ray_cache.clear()
             v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]]
             pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
-            rays = (np.linalg.inv(K) @ pix).T.reshape(depth.shape + (3,))
+            # float32: the per-frame products stay cheap (sub-micrometre at 10 m)
+            rays = (np.linalg.inv(K) @ pix).T.reshape(depth.shape + (3,)).astype(np.float32)
             self._ray_cache[key] = rays
         valid = np.isfinite(depth) & (depth > 0) & (depth <= self.settings.frontend.max_depth)
         return depth, labels, K, rays, valid
 
-    def _points_odom(self, frame: CameraFrame, depth, rays) -> np.ndarray:
-        T = frame.T_odom_cam
-        cam = rays * np.nan_to_num(depth)[..., None]
-        return cam @ T[:3, :3].T + T[:3, 3]
-
     def _feed_gravity(self, frame: CameraFrame) -> None:
         depth, labels, K, rays, valid = self._strided(frame)
-        pts = self._points_odom(frame, depth, rays)
+        cam = rays * np.where(valid, depth, 0.0)[..., None]
         if labels is not None:
             floor = valid & (labels == FLOOR)
         else:  # no labels: floor candidates from depth normals and the camera's own up axis
-            cam = rays * np.nan_to_num(depth)[..., None]
             floor = valid & bootstrap_floor_mask(cam, self.settings.frontend.labeller)
-        self.gravity.add_floor_points(pts[floor], frame.T_odom_cam[:3, 3])
+        T = frame.T_odom_cam
+        self.gravity.add_floor_points(cam[floor] @ T[:3, :3].T + T[:3, 3], T[:3, 3])
 
     def _fuse_camera(self, frame: CameraFrame) -> None:
         f = self.settings.frontend
         grav = self.gravity
         depth, labels, K, rays, valid = self._strided(frame)
+        T = frame.T_odom_cam
         R_plane = grav.R_plane_odom
-        pts = self._points_odom(frame, depth, rays) @ R_plane.T  # plane frame
-        height = pts[..., 2] - grav.floor_height
-        if labels is None:
-            normals = depth_normals(pts, depth, valid, f.labeller.normal_step)
-            labels = label_frame(height, normals, valid, f.labeller)
-        labels = np.where(valid, labels, 0).astype(np.uint8)
-        floor = valid & (labels == FLOOR)
-        if floor.any():  # track slow vertical drift of the odometry
-            grav.observe_floor_heights(pts[floor][:, 2])
-            height = pts[..., 2] - grav.floor_height
-        R_up_cam = upright_rotation(frame.T_odom_cam[:3, :3], -grav.up_odom)
-        wall = refine_wall_mask(np.where(valid, depth, 0), labels, K, R_up_cam, f.wall_mask)
-        band = (height >= f.min_obstacle_height) & (height <= f.max_obstacle_height)
-        obstacle = valid & band & (labels != FLOOR) & (labels != CEILING)
-        wall_pts = wall & valid & (height >= f.min_obstacle_height)
-        sensor = plane_pose(frame.T_odom_cam, R_plane, "z")
+        R, t = R_plane @ T[:3, :3], R_plane @ T[:3, 3]  # camera -> plane frame
+        if labels is None:  # the labeller needs the organised cloud
+            organised = (rays * np.where(valid, depth, 0.0)[..., None]) @ R.T + t
+            normals = depth_normals(organised, depth, valid, f.labeller.normal_step)
+            labels = label_frame(organised[..., 2] - grav.floor_height, normals, valid, f.labeller)
+        # from here on only the valid pixels, flattened
+        idx = np.flatnonzero(valid)
+        d = depth.reshape(-1)[idx]
+        ray = rays.reshape(-1, 3)[idx]
+        lab = labels.reshape(-1)[idx]
+        pts = ((ray * d[:, None]) @ R.T.astype(np.float32)).astype(float) + t
+        is_floor, is_wall_label = lab == FLOOR, lab == WALL
+        if is_floor.any():  # track slow vertical drift of the odometry
+            grav.observe_floor_heights(pts[is_floor, 2])
+        height = pts[:, 2] - grav.floor_height
+        R_up_cam = upright_rotation(T[:3, :3], -grav.up_odom)
+        wall = refine_wall_points(ray, d, is_wall_label, K, R_up_cam, f.wall_mask)
+        above = height >= f.min_obstacle_height
+        obstacle = above & (height <= f.max_obstacle_height) & ~is_floor & (lab != CEILING)
+        wall &= above
+        sensor = plane_pose(T, R_plane, "z")
+        centre = np.array(sensor[:2])
+        xy = pts[:, :2]
         # free space: rays to floor points end there, rays to walls stop free_margin short
-        ray_end = valid & ((labels == FLOOR) | (labels == WALL))
-        xy = pts[..., :2]
-        angles, ranges = self._azimuth_bins(np.array(sensor[:2]), sensor[2], xy[ray_end], labels[ray_end] == WALL)
-        hits = np.concatenate([xy[obstacle], xy[wall_pts]])
-        self._fuse(np.array(sensor[:2]), angles, ranges, hits, xy[wall_pts])
+        ray_end = is_floor | is_wall_label
+        angles, ranges = self._azimuth_bins(centre, sensor[2], xy[ray_end], is_wall_label[ray_end])
+        self._fuse(centre, angles, ranges, xy[obstacle | wall], xy[wall])
         self._record_pose(sensor)
         self.frames_fused += 1
 
@@ -308,15 +310,15 @@ class RollingBEV:
         """One ray per azimuth bin: the farthest free range among the bin's points."""
         if len(xy) == 0:
             return np.zeros(0), np.zeros(0)
-        rel = xy - centre
-        rng_ = np.hypot(rel[:, 0], rel[:, 1])
-        rng_ = np.where(is_wall, np.maximum(rng_ - self.settings.bev.free_margin, 0.0), rng_)
-        ang = np.angle(np.exp(1j * (np.arctan2(rel[:, 1], rel[:, 0]) - yaw)))  # relative to heading
+        rel = (xy - centre).astype(np.float32)  # float32: bins are 0.5 deg wide
+        dist = np.hypot(rel[:, 0], rel[:, 1])
+        dist = np.where(is_wall, np.maximum(dist - self.settings.bev.free_margin, 0.0), dist)
+        ang = (np.arctan2(rel[:, 1], rel[:, 0]) - yaw + np.pi) % (2 * np.pi) - np.pi  # relative to heading
         width = np.deg2rad(self.settings.bev.azimuth_bin_deg)
         b = np.floor(ang / width).astype(np.int64)
         b0 = b.min()
         free = np.zeros(b.max() - b0 + 1)
-        np.maximum.at(free, b - b0, rng_)
+        np.maximum.at(free, b - b0, dist.astype(float))
         angles = yaw + (np.arange(len(free)) + b0 + 0.5) * width
         return angles, free
 

@@ -48,27 +48,41 @@ def refine_wall_mask(
     """
     h, w = depth.shape
     wall = labels == WALL
-    if not settings.enabled:
-        return wall & np.isfinite(depth) & (depth > 0)
     valid = np.isfinite(depth) & (depth > 0)
+    if not settings.enabled:
+        return wall & valid
     rows, cols = np.nonzero(valid)
-    d = depth[rows, cols].astype(float)
-    # back-project, rotate upright (eq. 2), and warp to the upright image column (eq. 1)
-    K_inv = np.linalg.inv(K)
-    rays = K_inv @ np.stack([cols + 0.0, rows + 0.0, np.ones(len(d))])
-    up = (R_up_cam @ rays) * d
-    d_hat = up[2]
-    front = d_hat > settings.min_forward_depth
-    u_hat = np.full(len(d), -1, dtype=np.int64)
-    u_hat[front] = np.floor(K[0, 0] * up[0, front] / d_hat[front] + K[0, 2]).astype(np.int64)
-    is_wall = wall[rows, cols] & front
-
+    rays = np.stack([cols + 0.0, rows + 0.0, np.ones(len(rows))], axis=1) @ np.linalg.inv(K).T
+    keep = refine_wall_points(rays, depth[rows, cols].astype(float), wall[rows, cols], K, R_up_cam, settings)
     out = np.zeros((h, w), dtype=bool)
+    out[rows[keep], cols[keep]] = True
+    return out
+
+
+def refine_wall_points(
+    rays: np.ndarray,
+    depth: np.ndarray,
+    is_wall: np.ndarray,
+    K: np.ndarray,
+    R_up_cam: np.ndarray,
+    settings: WallMaskSettings,
+) -> np.ndarray:
+    """The same filter on a flat list of valid pixels: rays (N, 3) = K^-1 p (z = 1),
+    depth (N,) > 0, is_wall (N,) bool. Returns the kept wall pixels (N,) bool."""
+    if not settings.enabled:
+        return is_wall.copy()
+    # rotate upright (eq. 2) and warp to the upright image column (eq. 1)
+    up = (rays @ R_up_cam.T.astype(rays.dtype)) * depth[:, None]
+    d_hat = up[:, 2].astype(float)
+    front = d_hat > settings.min_forward_depth
+    kept = np.zeros(len(depth), dtype=bool)
+    is_wall = is_wall & front
     if not is_wall.any():
-        return out
+        return kept
+    u_hat = np.zeros(len(depth), dtype=np.int64)
+    u_hat[front] = np.floor(K[0, 0] * up[front, 0] / d_hat[front] + K[0, 2]).astype(np.int64)
     # shift columns to a compact 0..C-1 range (warped columns may leave the image)
-    c_min = u_hat[front].min()
-    column = u_hat - c_min
+    column = u_hat - u_hat[front].min()
     n_cols = int(column[front].max()) + 1
 
     # deepest non-wall pixel per column
@@ -77,11 +91,12 @@ def refine_wall_mask(
     np.maximum.at(deepest_other, column[other], d_hat[other])
 
     # wall pixels sorted by (column, depth): medians and segments per column in one pass
-    w_idx = np.nonzero(is_wall)[0]
+    w_idx = np.flatnonzero(is_wall)
     w_col, w_d = column[w_idx], d_hat[w_idx]
-    order = np.lexsort((w_d, w_col))
+    # one float key (column-major, then depth) sorts faster than a lexsort
+    order = np.argsort(w_col * (float(w_d.max()) + 1.0) + w_d)
     w_idx, w_col, w_d = w_idx[order], w_col[order], w_d[order]
-    starts = np.r_[0, np.nonzero(np.diff(w_col))[0] + 1]
+    starts = np.r_[0, np.flatnonzero(np.diff(w_col)) + 1]
     counts = np.diff(np.r_[starts, len(w_col)])
     col_ids = w_col[starts]
     median = 0.5 * (w_d[starts + (counts - 1) // 2] + w_d[starts + counts // 2])  # eq. 3
@@ -94,7 +109,5 @@ def refine_wall_mask(
     # sorted by depth, the farthest segment (largest median, eq. 5) is the column's last
     last_segment = segment[starts + counts - 1]
     group = np.repeat(np.arange(len(starts)), counts)
-    kept = keep_column[group] & (segment == last_segment[group])
-    keep_idx = w_idx[kept]
-    out[rows[keep_idx], cols[keep_idx]] = True
-    return out
+    kept[w_idx[keep_column[group] & (segment == last_segment[group])]] = True
+    return kept
