@@ -45,11 +45,12 @@ def bev_like_points(n_rooms_x: int, n_rooms_y: int, rng, spacing=0.05, noise=0.0
 
 
 def timed(fn, repeat=3):
+    """Best-of-repeat CPU time of this process (steadier than wall time on a shared machine)."""
     best = np.inf
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         out = fn()
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, time.process_time() - t0)
     return best, out
 
 

@@ -99,12 +99,13 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
     if n < max(settings.min_points, 2):
         return LineSet.empty()
     tree = cKDTree(pts)
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     taken = np.zeros(n, dtype=bool)  # owned by an accepted line
     tried = np.zeros(n, dtype=bool)  # used as a seed (so every seed is tried once)
     pool = np.arange(n)  # indices of points not taken; compacted after each accepted line
     pool_pts = pts
     found = []
-    for seed in rng.permutation(n):
+    for seed in rng.permutation(n).tolist():
         if taken[seed] or tried[seed]:
             continue
         tried[seed] = True
@@ -112,21 +113,29 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
         neigh = neigh[~taken[neigh]]
         if len(neigh) < settings.min_seed_neighbours:
             continue  # isolated point: noise
-        # Grow inside a local window first: most seeds end there (short fragments, noise)
-        # and a window query is far cheaper than scanning every free point. Only a line
-        # that reaches the window's rim continues over the whole pool.
-        local = np.asarray(tree.query_ball_point(pts[seed], settings.local_radius), dtype=np.int64)
-        local = local[~taken[local]]
-        support = _grow(local, pts[local], pts[neigh], pts[seed], settings)
+        # Grow inside a window around the seed: most seeds end there (short fragments,
+        # noise) and a window is far cheaper than scanning every free point. A line that
+        # reaches the window's rim regrows in a window `window_growth` times wider, and
+        # finally over all free points.
+        initial = pts[neigh]
+        radius = settings.local_radius
+        while True:
+            if radius is None:
+                window, window_pts = pool, pool_pts
+            else:
+                window = np.asarray(tree.query_ball_point(pts[seed], radius), dtype=np.int64)
+                window = window[~taken[window]]
+                window_pts = pts[window]
+            support = _grow(window, window_pts, initial, pts[seed], settings)
+            if support is None:
+                break
+            members = window[support]
+            initial = pts[members]
+            if radius is None or np.max(np.sum((pts[members] - pts[seed]) ** 2, axis=1)) <= (radius - settings.gap) ** 2:
+                break
+            radius = radius * settings.window_growth if radius * settings.window_growth < extent else None
         if support is None:
             continue
-        members = local[support]
-        reach = np.linalg.norm(pts[members] - pts[seed], axis=1).max()
-        if reach > settings.local_radius - settings.gap:
-            support = _grow(pool, pool_pts, pts[members], pts[seed], settings)
-            if support is None:
-                continue
-            members = pool[support]
         c, direction = _pca_line(pts[members])
         t = (pts[members] - c) @ direction
         if len(members) < settings.min_points or t.max() - t.min() < settings.min_length:
@@ -145,24 +154,34 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
 
 def _grow(pool, pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSettings):
     """Indices into pool of the converged support of the line grown from the points
-    `initial`, anchored at seed_pt (the run of collinear points nearest the seed)."""
-    current = initial
+    `initial`, anchored at seed_pt (the run of collinear points nearest the seed).
+
+    Converged: the support stopped changing, or the refit moved the line by less than
+    converge_tolerance over the support's extent (the next round would select the same
+    points, so it is skipped)."""
+    c, direction = _pca_line(initial)
     previous = None
     for _ in range(settings.max_grow_iterations):
-        c, direction = _pca_line(current)
         normal = np.array([-direction[1], direction[0]])
         rel = pool_pts - c
         cand = np.flatnonzero(np.abs(rel @ normal) <= settings.inlier_distance)
         if len(cand) < 2:
             return None
-        run = _connected_run(rel[cand] @ direction, float((seed_pt - c) @ direction), settings.gap)
+        t = rel[cand] @ direction
+        run = _connected_run(t, float((seed_pt - c) @ direction), settings.gap)
         if run is None or len(run) < 2:
             return None
         support = np.sort(cand[run])
-        if previous is not None and np.array_equal(support, previous):
+        if previous is not None and len(support) == len(previous) and np.array_equal(support, previous):
             break
         previous = support
-        current = pool_pts[support]
+        new_c, new_direction = _pca_line(pool_pts[support])
+        # Largest displacement of the line over the support's extent after the refit.
+        half = 0.5 * (t[run].max() - t[run].min())
+        shift = abs(float((new_c - c) @ normal)) + half * abs(float(new_direction @ normal))
+        c, direction = new_c, new_direction
+        if shift < settings.converge_tolerance:
+            break
     return previous
 
 
