@@ -82,3 +82,27 @@ def write_fake_session(path, frames, settings: Settings | None = None, floorplan
             if estimates:
                 log.write_estimate(fake_estimate(i, f.timestamp))
     return logged
+
+
+def record_laser_session(path, n_frames: int = 30, settings: Settings | None = None, scene: str = "rooms", seed: int = 0):
+    """Run the real localizer on a simulated 2D laser walk and log it (as the CLI does).
+    Returns the estimates."""
+    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.raycast2d import RangeSensor2D
+    from zfloc_stream.rng import make_rng
+    from zfloc_stream.sim import build_scene
+    from zfloc_stream.sim.trajectory import random_walk
+
+    settings = settings or Settings()
+    plan = build_scene(scene, seed).floorplan
+    walk = random_walk(build_scene(scene, seed), make_rng(seed, "walk"), n_frames)
+    sensor = RangeSensor2D(n_beams=180, range_noise=0.01)
+    localizer = Localizer(plan, settings)
+    estimates = []
+    with SessionWriter(path, settings, plan, metadata={"source": f"laser walk in {scene}"}) as log:
+        for i, p in enumerate(walk):
+            frame = log.write_frame(i, sensor.frame(plan, p, p, 0.1 * i, make_rng(seed, "scan", i)))
+            est = localizer.push(frame)
+            log.write_estimate(est, localizer)
+            estimates.append(est)
+    return estimates

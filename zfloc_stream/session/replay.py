@@ -99,6 +99,12 @@ def replay_settings(session: Session, config: str | Path | None = None, override
 
 
 # --- comparison -----------------------------------------------------------------------------
+def _is_repeated(desc) -> bool:
+    # protobuf >= 5 spells it is_repeated; older releases only have label
+    flag = getattr(desc, "is_repeated", None)
+    return bool(flag) if flag is not None else desc.label == desc.LABEL_REPEATED
+
+
 def _flatten(value, prefix: str = "") -> dict[str, object]:
     """Nested protobuf messages / dicts / lists as {dotted.path: leaf}."""
     if hasattr(value, "ListFields"):
@@ -106,7 +112,7 @@ def _flatten(value, prefix: str = "") -> dict[str, object]:
         for desc in value.DESCRIPTOR.fields:  # every field, set or not: a missing one is 0
             v = getattr(value, desc.name)
             key = f"{prefix}{desc.name}"
-            if desc.label == desc.LABEL_REPEATED:
+            if _is_repeated(desc):
                 out[key + ".len"] = len(v)
                 for i, item in enumerate(v):
                     out.update(_flatten(item, f"{key}[{i}]."))
@@ -201,6 +207,12 @@ def summarize_run(estimates: list[Estimate | None], truth: list, settings: Setti
     return out
 
 
+def require_outputs(session: Session) -> None:
+    """Refuse early (before any engine work) to check a session that logged no outputs."""
+    if session.topics is not None and S.TOPIC_STATUS not in session.topics:
+        raise SessionLogError(f"{session.path}: nothing to check: the session holds no logged outputs ({S.TOPIC_STATUS})")
+
+
 # --- replay ---------------------------------------------------------------------------------
 def replay_session(
     session: Session,
@@ -217,6 +229,8 @@ def replay_session(
 
     if start < 0 or (stop is not None and stop <= start):
         raise SessionLogError(f"empty frame range: from {start} to {stop}")
+    if check:
+        require_outputs(session)
     localizer = Localizer(floorplan, settings)
     writer = None
     if out is not None:

@@ -89,10 +89,12 @@ def _summary_table(result, success_distance: float) -> str:
 def run(args) -> int:
     from ..floorplan import Floorplan
     from ..session import read_session
-    from ..session.replay import replay_session, replay_settings
+    from ..session.replay import replay_session, replay_settings, require_outputs
 
     session = read_session(args.session, salvage=args.salvage)
     settings = replay_settings(session, args.config, args.set)
+    if args.check:
+        require_outputs(session)
     if args.floorplan is not None:
         floorplan = Floorplan.load(args.floorplan, settings=settings)
     else:
