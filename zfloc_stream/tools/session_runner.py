@@ -56,7 +56,7 @@ def run_session(
         SessionWriter(out_dir / "session.mcap", settings, floorplan) as log,
     ):
         for index, frame in enumerate(tqdm(frames, total=total, desc=description, disable=not progress, unit="frame")):
-            log.write_frame(index, frame)
+            frame = log.write_frame(index, frame)  # push the frame as logged: replays match bit for bit
             est = localizer.push(frame)
             log.write_estimate(est, localizer)
             csv_writer.write(est)
