@@ -575,6 +575,17 @@ def _gen_symmetric(seed: int) -> Scene:
                      doors=doors, walls=(segments, thickness))
 
 
+def make_scene(name: str, rooms: list[Room], connections: list[Connection], seed: int = 0, pillars=(),
+               furniture=None, wall_height: float = 2.7, waypoints: dict | None = None) -> Scene:
+    """A scene from a hand-made room plan (tests, custom layouts). Room coordinates should
+    lie on the lattice given by layout.snap; furniture None = seeded automatic furnishing,
+    an (K, 6) array = exactly these pieces."""
+    rng = make_rng(seed, "scene", name)
+    furniture = None if furniture is None else np.asarray(furniture, dtype=float).reshape(-1, 6)
+    return _assemble(name, seed, list(rooms), list(connections), rng, pillars=pillars, furniture=furniture,
+                     wall_height=wall_height, waypoints=waypoints)
+
+
 SCENES = {
     "rooms": _gen_rooms,
     "apartment": _gen_apartment,
