@@ -278,7 +278,7 @@ class RollingBEV:
         R_plane = grav.R_plane_odom
         R, t = R_plane @ T[:3, :3], R_plane @ T[:3, 3]  # camera -> plane frame
         if labels is None:  # the labeller needs the organised cloud
-            organised = (rays * np.where(valid, depth, 0.0)[..., None]) @ R.T + t
+            organised = (rays * np.where(valid, depth, 0)[..., None]) @ R.T.astype(np.float32) + t.astype(np.float32)
             normals = depth_normals(organised, depth, valid, f.labeller.normal_step)
             labels = label_frame(organised[..., 2] - grav.floor_height, normals, valid, f.labeller)
         # from here on only the valid pixels, flattened
@@ -344,8 +344,9 @@ class RollingBEV:
                 hr, hc = np.divmod(hit_flat, g.n)
                 inside = (hr >= lo_c[1]) & (hr < hi_c[1]) & (hc >= lo_c[0]) & (hc < hi_c[0])
                 mask[hr[inside] - lo_c[1], hc[inside] - lo_c[0]] = 0  # a frame never frees its own hits
-                free = mask.astype(bool)
-                region[free] = np.maximum(region[free] + b.logodds_free, b.logodds_min)
+                # in place on the crop (a view of the grid); the clamp touches only the crop
+                np.add(region, np.float32(b.logodds_free), out=region, where=mask.view(bool))
+                np.maximum(region, np.float32(b.logodds_min), out=region)
         flat_lo = g.logodds.reshape(-1)
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
         _increment(g.hits, hit_flat)
