@@ -29,7 +29,6 @@ class LineSettings(Section):
     neighbourhood_radius: float = 0.25  # m, PCA neighbourhood of a seed
     min_seed_neighbours: int = 3  # fewer free points around a seed: it is noise
     local_radius: float = 2.0  # m, a line first grows inside this window around its seed (speed)
-    window_growth: float = 4.0  # a line reaching its window's rim regrows in a window this much wider
     inlier_distance: float = 0.05  # m, orthogonal distance to grow a line
     gap: float = 0.3  # m, largest gap along a line before it is split
     max_grow_iterations: int = 20  # refit/regrow rounds per seed (usually converges in 2-4)

@@ -99,7 +99,6 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
     if n < max(settings.min_points, 2):
         return LineSet.empty()
     tree = cKDTree(pts)
-    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     taken = np.zeros(n, dtype=bool)  # owned by an accepted line
     tried = np.zeros(n, dtype=bool)  # used as a seed (so every seed is tried once)
     pool = np.arange(n)  # indices of points not taken; compacted after each accepted line
@@ -109,37 +108,32 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
         if taken[seed] or tried[seed]:
             continue
         tried[seed] = True
-        neigh = np.asarray(tree.query_ball_point(pts[seed], settings.neighbourhood_radius), dtype=np.int64)
+        neigh = np.asarray(tree.query_ball_point(pts[seed], settings.neighbourhood_radius, return_sorted=False), dtype=np.int64)
         neigh = neigh[~taken[neigh]]
         if len(neigh) < settings.min_seed_neighbours:
             continue  # isolated point: noise
-        # Grow inside a window around the seed: most seeds end there (short fragments,
-        # noise) and a window is far cheaper than scanning every free point. A line that
-        # reaches the window's rim regrows in a window `window_growth` times wider, and
-        # finally over all free points.
-        initial = pts[neigh]
-        radius = settings.local_radius
-        while True:
-            if radius is None:
-                window, window_pts = pool, pool_pts
-            else:
-                window = np.asarray(tree.query_ball_point(pts[seed], radius), dtype=np.int64)
-                window = window[~taken[window]]
-                window_pts = pts[window]
-            support = _grow(window, window_pts, initial, pts[seed], settings)
-            if support is None:
-                break
+        # Grow inside a local window first: most seeds end there (short fragments, noise)
+        # and a window is far cheaper than scanning every free point. Only a line that
+        # reaches the window's rim regrows over all free points.
+        window = np.asarray(tree.query_ball_point(pts[seed], settings.local_radius, return_sorted=False), dtype=np.int64)
+        window = window[~taken[window]]
+        support = _grow(pts[window], pts[neigh], pts[seed], settings)
+        if support is not None:
             members = window[support]
-            initial = pts[members]
-            if radius is None or np.max(np.sum((pts[members] - pts[seed]) ** 2, axis=1)) <= (radius - settings.gap) ** 2:
-                break
-            radius = radius * settings.window_growth if radius * settings.window_growth < extent else None
+            reach2 = np.max(np.sum((pts[members] - pts[seed]) ** 2, axis=1))
+            if reach2 > (settings.local_radius - settings.gap) ** 2:
+                support = _grow(pool_pts, pts[members], pts[seed], settings)
+                members = None if support is None else pool[support]
         if support is None:
+            tried[neigh] = True  # nothing grows here: its neighbours would fail the same way
             continue
         c, direction = _pca_line(pts[members])
         t = (pts[members] - c) @ direction
         if len(members) < settings.min_points or t.max() - t.min() < settings.min_length:
-            tried[members] = True  # a fragment: its points need not seed again (they may still join a line)
+            # A fragment: neither its points nor the seed's neighbours need to seed again
+            # (they stay free, so a line grown elsewhere may still absorb them).
+            tried[members] = True
+            tried[neigh] = True
             continue
         found.append((*_canonical(c, direction, t.min(), t.max()), len(members)))
         taken[members] = True
@@ -152,8 +146,8 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
     return lines.subset(np.argsort(-lines.lengths, kind="stable"))
 
 
-def _grow(pool, pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSettings):
-    """Indices into pool of the converged support of the line grown from the points
+def _grow(pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSettings):
+    """Indices into pool_pts of the converged support of the line grown from the points
     `initial`, anchored at seed_pt (the run of collinear points nearest the seed).
 
     Converged: the support stopped changing, or the refit moved the line by less than
@@ -163,11 +157,10 @@ def _grow(pool, pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: Li
     previous = None
     for _ in range(settings.max_grow_iterations):
         normal = np.array([-direction[1], direction[0]])
-        rel = pool_pts - c
-        cand = np.flatnonzero(np.abs(rel @ normal) <= settings.inlier_distance)
+        cand = np.flatnonzero(np.abs(pool_pts @ normal - c @ normal) <= settings.inlier_distance)
         if len(cand) < 2:
             return None
-        t = rel[cand] @ direction
+        t = pool_pts[cand] @ direction - c @ direction
         run = _connected_run(t, float((seed_pt - c) @ direction), settings.gap)
         if run is None or len(run) < 2:
             return None
