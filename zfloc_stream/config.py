@@ -90,18 +90,25 @@ class ScoringSettings(Section):
     top_k: int = 50  # hypotheses re-ranked with the full score
     distinct_translation: float = 0.5  # m, hypotheses closer than this (and distinct_angle) are one
     distinct_angle_deg: float = 10.0
+    chunk_size: int = 1_000_000  # (hypotheses x points) elements per vectorised block: bounds memory
+    wall_bucket_size: float = 2.0  # m, Cv fetches floorplan wall points by buckets of this size (speed only)
 
 
 class RefineSettings(Section):
     huber_delta: float = 0.1  # m
     max_evaluations: int = 50
     top_n: int = 5  # hypotheses refined
+    max_points: int = 2000  # BEV wall points used by the refinement (evenly thinned)
+    tolerance: float = 1e-6  # stop: relative cost decrease, step or gradient below this
+    initial_damping: float = 1e-3  # Levenberg-Marquardt lambda at the start
+    damping_factor: float = 10.0  # lambda divided by this after a good step, multiplied after a bad one
 
 
 class RansacSettings(Section):
     iterations: int = 500
     tracking_iterations: int = 150  # fewer fresh samples while one mode is tracked
     max_hypotheses: int = 10  # ranked distinct hypotheses returned
+    match_fraction: float = 0.03  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
 
 
 class EstimatorSettings(Section):
@@ -298,6 +305,7 @@ class StudySettings(Section):
     eval_frames: int = 10  # success/RMSE look at this many final frames of a chunk
     thresholds: list[float] = [1.0, 0.5]  # m, success thresholds reported (<= counts as success)
     max_chunks_per_sequence: int = 20  # consecutive non-overlapping chunks kept per sequence and length
+    connect_timeout_s: float = 10.0  # s, waiting for a remote dask scheduler (--scheduler)
 
 
 class Settings(Section):

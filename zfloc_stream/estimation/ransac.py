@@ -1,0 +1,493 @@
+"""Hybrid RANSAC over the four minimal solvers (paper 3.2-3.4) -> ranked distinct hypotheses.
+
+One iteration = one minimal sample of BEV primitives for a solver chosen at random from
+the enabled pool. Without descriptors the floorplan side of a correspondence has to be
+enumerated (paper 3.2, "correspondences must be enumerated exhaustively"); the pruning
+makes that affordable and this module does it with lookup tables built once per floorplan:
+
+  (i)   lines are deduplicated (floorplan: by Floorplan.lines; BEV: here);
+  (ii)  floorplan triplets / pairs are a line and its spatial neighbours
+        (Floorplan.line_neighbours), BEV samples likewise (same distance, divided by the
+        scale prior); all-parallel triplets and parallel pairs are never sampled;
+  (iii) normal consistency: floorplan tuples are binned by the angles of their lines
+        relative to the anchor line, so the tuples whose normals can agree with a BEV
+        sample (|cos| > tau_p once the anchor fixes the rotation) are a handful of
+        contiguous index ranges; the exact test runs in the solver before solving.
+
+Each BEV sample then meets ceil(match_fraction x n) floorplan tuples drawn uniformly from
+its n pruned candidates (all of them for match_fraction >= 1). Drawing a fraction instead
+of all keeps the cost of one iteration proportional to the floorplan's ambiguity while the
+probability that the true correspondence is tried somewhere in the run stays
+1 - exp(-iterations_per_solver * match_fraction * P(good BEV sample)), independent of the
+floorplan's size. Everything is drawn vectorised and grouped by solver.
+
+Circle samples: 2C pairs floorplan centre pairs whose distance ratio lies in
+[min_scale, max_scale]; LC pairs a line with a circle within the neighbour distance.
+
+Scale modes reduce the pool (see solvers.py): free -> 3L, 2C, LC; prior -> all four;
+fixed -> one rigid two-line solver (labelled "2L", standing in for both 3L and 2L), 2C, LC.
+Solvers whose primitives are missing (no circles -> no 2C / LC) are dropped.
+
+Scoring is coarse to fine (scoring.py); the top refine.top_n distinct hypotheses are
+refined (refine.py), rescored with the full C and the list re-ranked and de-duplicated.
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..config import EstimatorSettings, FloorplanSettings, LineSettings, Settings, SolverSettings
+from ..errors import InputError
+from ..floorplan import _segment_distances as segment_distances
+from ..geometry import CircleSet, LineSet
+from ..observation import BevObservation
+from ..primitives import deduplicate_lines
+from ..sim2 import Sim2
+from .refine import refine
+from .scoring import rank_coarse_to_fine, score_hypotheses, sparse_line_points, distinct
+from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
+
+WARM = "warm"
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    alignment: Sim2  # BEV / odometry plane -> floorplan
+    score: float  # C = Cc - Cv
+    cc: float
+    cv: float
+    solver: str  # "3L", "2L", "2C", "LC" or "warm"
+
+
+@dataclass(frozen=True)
+class LocalizationResult:
+    hypotheses: list[Hypothesis]  # best first, pairwise distinct
+    timings: dict[str, float] = field(default_factory=dict)  # seconds: model_estimation, scoring, refinement
+    n_models: int = 0  # models generated (solver outputs + warm starts) before scoring
+
+    @property
+    def best(self) -> Hypothesis | None:
+        return self.hypotheses[0] if self.hypotheses else None
+
+
+# --------------------------------------------------------------------------------------
+# small geometry helpers
+# --------------------------------------------------------------------------------------
+
+
+def _normal_angles(lines: LineSet) -> np.ndarray:
+    """Line orientation as the angle of its normal modulo pi (a line has no direction)."""
+    return np.mod(np.arctan2(lines.normals[:, 1], lines.normals[:, 0]), np.pi)
+
+
+def _parallel_mod_pi(a: np.ndarray, b: np.ndarray, max_angle: float) -> np.ndarray:
+    return np.abs(np.sin(a - b)) < np.sin(max_angle)
+
+
+def _point_segment_distance(p: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """(P, S) distance from points (P, 2) to segments (S, 2, 2)."""
+    a, b = ends[None, :, 0], ends[None, :, 1]
+    d = b - a
+    t = np.clip(np.sum((p[:, None] - a) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-18), 0.0, 1.0)
+    return np.linalg.norm(p[:, None] - (a + t[..., None] * d), axis=-1)
+
+
+def _neighbour_lists(lines: LineSet, distance: float) -> list[np.ndarray]:
+    e = lines.endpoints
+    if len(e) == 0:
+        return []
+    near = segment_distances(e[:, 0], e[:, 1], e[:, 0], e[:, 1]) < distance
+    np.fill_diagonal(near, False)
+    return [np.flatnonzero(row) for row in near]
+
+
+def _ordered_triplets(neighbours: Sequence[np.ndarray]) -> np.ndarray:
+    """(T, 3) rows (i, j, k): j != k both neighbours of i."""
+    out = []
+    for i, nb in enumerate(neighbours):
+        if len(nb) < 2:
+            continue
+        j, k = np.meshgrid(nb, nb, indexing="ij")
+        keep = j != k
+        out.append(np.stack([np.full(keep.sum(), i), j[keep], k[keep]], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
+
+
+def _ordered_pairs(neighbours: Sequence[np.ndarray]) -> np.ndarray:
+    """(P, 2) rows (i, j): j a neighbour of i."""
+    if not neighbours:
+        return np.zeros((0, 2), dtype=np.int64)
+    i = np.repeat(np.arange(len(neighbours)), [len(nb) for nb in neighbours])
+    j = np.concatenate([np.asarray(nb, dtype=np.int64) for nb in neighbours]) if len(i) else np.zeros(0, dtype=np.int64)
+    return np.stack([i, j], axis=1).astype(np.int64)
+
+
+def _line_circle_pairs(lines: LineSet, circles: CircleSet, distance: float, min_lever: float) -> np.ndarray:
+    """(P, 2) rows (line, circle): centre within `distance` of the segment and at least
+    min_lever from the infinite line (the LC scale is the ratio of these levers)."""
+    if len(lines) == 0 or len(circles) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    near = _point_segment_distance(circles.centers, lines.endpoints) < distance  # (C, L)
+    lever = np.abs(circles.centers @ lines.normals.T + lines.offsets[None, :])
+    c, li = np.nonzero(near & (lever >= min_lever))
+    order = np.lexsort((c, li))
+    return np.stack([li[order], c[order]], axis=1).astype(np.int64)
+
+
+def _circle_pairs(circles: CircleSet, min_distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ordered pairs (k, l), k != l, centres at least min_distance apart; and distances."""
+    n = len(circles)
+    if n < 2:
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
+    k, l = np.nonzero(~np.eye(n, dtype=bool))
+    dist = np.linalg.norm(circles.centers[l] - circles.centers[k], axis=1)
+    keep = dist >= min_distance
+    return np.stack([k[keep], l[keep]], axis=1).astype(np.int64), dist[keep]
+
+
+# --------------------------------------------------------------------------------------
+# normal-consistency lookup
+# --------------------------------------------------------------------------------------
+
+
+class _AngleTable:
+    """Floorplan tuples binned by the angles (mod pi) of their lines relative to the
+    anchor line. A query returns the index ranges of the bins that can hold tuples within
+    `tolerance` of the query angles: a superset of the normal-consistent tuples."""
+
+    def __init__(self, rows: np.ndarray, relative: np.ndarray, tolerance: float):
+        self.q = relative.shape[1]
+        self.tolerance = tolerance
+        nb = int(np.floor(np.pi / tolerance)) if tolerance > 0 else 1
+        # bins at least `tolerance` wide, and >= 3 of them so a query's bins are distinct
+        self.n_bins = nb if nb >= 3 else 1
+        self.width = np.pi / self.n_bins
+        key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
+        order = np.argsort(key, kind="stable")
+        self.rows = rows[order]
+        counts = np.bincount(key, minlength=self.n_bins**self.q)
+        self.counts = counts
+        self.start = np.cumsum(counts) - counts
+
+    def _key(self, bins: np.ndarray) -> np.ndarray:
+        key = np.zeros(bins.shape[:-1], dtype=np.int64)
+        for j in range(self.q):
+            key = key * self.n_bins + bins[..., j]
+        return key
+
+    def ranges(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(starts, sizes), each (B, R), for query angles (B, q)."""
+        B = len(query)
+        spread = 3 if self.n_bins >= 3 else 1
+        per_dim_bins, per_dim_valid = [], []
+        for j in range(self.q):
+            if spread == 1:
+                per_dim_bins.append(np.zeros((B, 1), dtype=np.int64))
+                per_dim_valid.append(np.ones((B, 1), dtype=bool))
+                continue
+            lo = np.floor((query[:, j] - self.tolerance) / self.width).astype(np.int64)
+            hi = np.floor((query[:, j] + self.tolerance) / self.width).astype(np.int64)
+            offs = lo[:, None] + np.arange(3)[None, :]
+            per_dim_bins.append(offs % self.n_bins)
+            per_dim_valid.append(offs <= hi[:, None])
+        # all combinations of per-dimension bins
+        grids = np.meshgrid(*[np.arange(spread)] * self.q, indexing="ij")
+        combos = np.stack([g.ravel() for g in grids], axis=1)  # (R, q)
+        bins = np.stack([per_dim_bins[j][:, combos[:, j]] for j in range(self.q)], axis=-1)  # (B, R, q)
+        valid = np.ones((B, len(combos)), dtype=bool)
+        for j in range(self.q):
+            valid &= per_dim_valid[j][:, combos[:, j]]
+        key = self._key(bins)
+        return self.start[key], np.where(valid, self.counts[key], 0)
+
+
+def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b)
+    uniform draws (with replacement) from its n_b candidates. Returns (query, table row)."""
+    n = sizes.sum(axis=1)
+    k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
+    query = np.repeat(np.arange(len(n)), k)
+    if len(query) == 0:
+        return query, np.zeros(0, dtype=np.int64)
+    u = np.minimum((rng.random(len(query)) * n[query]).astype(np.int64), n[query] - 1)
+    cum = np.cumsum(sizes, axis=1)[query]
+    r = (u[:, None] >= cum).sum(axis=1)
+    before = cum[np.arange(len(query)), r] - sizes[query, r]
+    return query, starts[query, r] + (u - before)
+
+
+# --------------------------------------------------------------------------------------
+# floorplan tables (built once per floorplan object and settings)
+# --------------------------------------------------------------------------------------
+
+
+def _settings_of(floorplan) -> Settings:
+    cfg = getattr(floorplan, "settings", None)
+    return cfg if isinstance(cfg, Settings) else Settings()
+
+
+class FloorplanMatches:
+    """Pruned floorplan tuples for every solver."""
+
+    def __init__(self, floorplan, solvers: SolverSettings):
+        fp_cfg: FloorplanSettings = _settings_of(floorplan).floorplan
+        self.lines: LineSet = floorplan.lines
+        self.circles: CircleSet = floorplan.circles
+        tol = float(np.arccos(np.clip(solvers.normal_consistency, -1.0, 1.0)))
+        par = np.deg2rad(solvers.parallel_angle_deg)
+        alpha = _normal_angles(self.lines)
+        neighbours = [np.asarray(nb, dtype=np.int64) for nb in floorplan.line_neighbours] if len(self.lines) else []
+        # 3L: a line, two of its neighbours, not all parallel
+        tri = _ordered_triplets(neighbours)
+        if len(tri):
+            a = alpha[tri]
+            keep = ~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))
+            tri = tri[keep]
+        self.triplets = _AngleTable(tri, (alpha[tri[:, 1:]] - alpha[tri[:, :1]]) if len(tri) else np.zeros((0, 2)), tol)
+        # 2L: a line and a non-parallel neighbour
+        pairs = _ordered_pairs(neighbours)
+        if len(pairs):
+            pairs = pairs[~_parallel_mod_pi(alpha[pairs[:, 0]], alpha[pairs[:, 1]], par)]
+        self.pairs = _AngleTable(pairs, (alpha[pairs[:, 1:]] - alpha[pairs[:, :1]]) if len(pairs) else np.zeros((0, 1)), tol)
+        # LC: a line and a nearby circle off the line (floorplan units: lever * min_scale)
+        self.line_circle = _line_circle_pairs(self.lines, self.circles, fp_cfg.neighbour_distance, solvers.min_baseline * solvers.min_scale)
+        # 2C: circle pairs sorted by centre distance (scale window -> one contiguous range)
+        cpairs, dist = _circle_pairs(self.circles, solvers.min_baseline * solvers.min_scale)
+        order = np.argsort(dist, kind="stable")
+        self.circle_pairs, self.circle_dist = cpairs[order], dist[order]
+
+
+_MATCHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
+    key = (solvers.normal_consistency, solvers.parallel_angle_deg, solvers.min_baseline, solvers.min_scale)
+    try:
+        cached = _MATCHES.get(floorplan)
+    except TypeError:
+        return FloorplanMatches(floorplan, solvers)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    matches = FloorplanMatches(floorplan, solvers)
+    try:
+        _MATCHES[floorplan] = (key, matches)
+    except TypeError:
+        pass
+    return matches
+
+
+# --------------------------------------------------------------------------------------
+# BEV samples
+# --------------------------------------------------------------------------------------
+
+
+class BevSamples:
+    """Every admissible minimal sample of BEV primitives, per solver."""
+
+    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float):
+        self.lines = deduplicate_lines(obs.lines, line_settings) if len(obs.lines) else obs.lines
+        self.circles = obs.circles
+        par = np.deg2rad(solvers.parallel_angle_deg)
+        alpha = _normal_angles(self.lines)
+        self.alpha = alpha
+        neighbours = _neighbour_lists(self.lines, neighbour_distance)
+        tri = _ordered_triplets(neighbours)
+        if len(tri):
+            a = alpha[tri]
+            tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
+        self.triplets = tri
+        pairs = _ordered_pairs(neighbours)
+        if len(pairs):
+            pairs = pairs[~_parallel_mod_pi(alpha[pairs[:, 0]], alpha[pairs[:, 1]], par)]
+        self.pairs = pairs
+        self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
+        self.circle_pairs, self.circle_dist = _circle_pairs(self.circles, solvers.min_baseline)
+
+
+# --------------------------------------------------------------------------------------
+# model generation per solver
+# --------------------------------------------------------------------------------------
+
+
+def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    return np.mod(alpha[rows[:, 1:]] - alpha[rows[:, :1]], np.pi)
+
+
+def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
+    picks = bev.triplets[rng.integers(len(bev.triplets), size=n)]
+    starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    b, f = picks[q], fp.triplets.rows[row]
+    return solve_3l(
+        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
+    )[0]
+
+
+def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
+    picks = bev.pairs[rng.integers(len(bev.pairs), size=n)]
+    starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    b, f = picks[q], fp.pairs.rows[row]
+    mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
+    return solve_2l(
+        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], scale_prior, rng, cfg.solvers, mode
+    )[0]
+
+
+def _models_lc(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
+    picks = bev.line_circle[rng.integers(len(bev.line_circle), size=n)]
+    starts = np.zeros((n, 1), dtype=np.int64)
+    sizes = np.full((n, 1), len(fp.line_circle), dtype=np.int64)
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    b, f = picks[q], fp.line_circle[row]
+    return solve_lc(
+        bev.lines.normals[b[:, 0]],
+        bev.lines.offsets[b[:, 0]],
+        bev.circles.centers[b[:, 1]],
+        fp.lines.normals[f[:, 0]],
+        fp.lines.offsets[f[:, 0]],
+        fp.circles.centers[f[:, 1]],
+        cfg.solvers,
+        cfg.scale_mode,
+        bev.circles.radii[b[:, 1]],
+        fp.circles.radii[f[:, 1]],
+    )[0]
+
+
+def _models_2c(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
+    pick = rng.integers(len(bev.circle_pairs), size=n)
+    picks, dist = bev.circle_pairs[pick], bev.circle_dist[pick]
+    lo = np.searchsorted(fp.circle_dist, cfg.solvers.min_scale * dist, side="left")
+    hi = np.searchsorted(fp.circle_dist, cfg.solvers.max_scale * dist, side="right")
+    q, row = _draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng)
+    b, f = picks[q], fp.circle_pairs[row]
+    return solve_2c(
+        bev.circles.centers[b], fp.circles.centers[f], cfg.solvers, cfg.scale_mode, bev.circles.radii[b], fp.circles.radii[f]
+    )[0]
+
+
+def solver_pool(cfg: EstimatorSettings, bev: BevSamples, fp: FloorplanMatches) -> list[str]:
+    """Enabled solvers after the scale-mode reduction and the primitive availability check
+    (order follows settings.solvers.pool, duplicates removed)."""
+    wanted: list[str] = []
+    for name in cfg.solvers.pool:
+        if cfg.scale_mode == "free" and name == "2L":
+            continue  # 2L needs a metric prior
+        if cfg.scale_mode == "fixed" and name == "3L":
+            name = "2L"  # rigid: two lines suffice
+        if name not in wanted:
+            wanted.append(name)
+    available = {
+        "3L": len(bev.triplets) > 0 and len(fp.triplets.rows) > 0,
+        "2L": len(bev.pairs) > 0 and len(fp.pairs.rows) > 0,
+        "LC": len(bev.line_circle) > 0 and len(fp.line_circle) > 0,
+        "2C": len(bev.circle_pairs) > 0 and len(fp.circle_pairs) > 0,
+    }
+    return [name for name in wanted if available[name]]
+
+
+# --------------------------------------------------------------------------------------
+# localize
+# --------------------------------------------------------------------------------------
+
+
+def _validate(obs, scale_prior: float, iterations: int) -> None:
+    if not isinstance(obs, BevObservation):
+        raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
+    if len(obs.lines) == 0 and len(obs.circles) == 0:
+        raise InputError("BEV observation has no lines and no circles: nothing to align to the floorplan")
+    if not (np.isfinite(scale_prior) and scale_prior > 0):
+        raise InputError(f"scale_prior must be a positive finite number, got {scale_prior}")
+    if iterations < 0:
+        raise InputError(f"iterations must be >= 0, got {iterations}")
+
+
+def localize(
+    floorplan,
+    obs: BevObservation,
+    settings: EstimatorSettings,
+    rng: np.random.Generator,
+    *,
+    scale_prior: float = 1.0,
+    warm_start: Sequence[Sim2] = (),
+    iterations: int | None = None,
+) -> LocalizationResult:
+    """Align the BEV observation to the floorplan; hypotheses ranked best first."""
+    cfg = settings
+    iterations = cfg.ransac.iterations if iterations is None else int(iterations)
+    _validate(obs, scale_prior, iterations)
+    t0 = time.perf_counter()
+
+    # ---- model estimation ------------------------------------------------------------
+    full_cfg = _settings_of(floorplan)
+    fp = floorplan_matches(floorplan, cfg.solvers)
+    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
+    pool = solver_pool(cfg, bev, fp)
+    warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
+    if not pool and not warm:
+        raise InputError(
+            f"not enough primitives for any enabled solver ({cfg.scale_mode} scale): BEV has {len(bev.lines)} lines / "
+            f"{len(bev.circles)} circles, floorplan {len(fp.lines)} lines / {len(fp.circles)} circles"
+        )
+    blocks, labels = [], []
+    if pool and iterations > 0:
+        counts = np.bincount(rng.integers(len(pool), size=iterations), minlength=len(pool))
+        for name, n in zip(pool, counts):
+            if n == 0:
+                continue
+            if name == "3L":
+                m = _models_3l(bev, fp, int(n), cfg, rng)
+            elif name == "2L":
+                m = _models_2l(bev, fp, int(n), cfg, rng, scale_prior)
+            elif name == "LC":
+                m = _models_lc(bev, fp, int(n), cfg, rng)
+            else:
+                m = _models_2c(bev, fp, int(n), cfg, rng)
+            blocks.append(m)
+            labels += [name] * len(m)
+    if warm:
+        blocks.append(np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm]))
+        labels += [WARM] * len(warm)
+    models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
+    labels_arr = np.array(labels, dtype=object)
+    t1 = time.perf_counter()
+
+    # ---- scoring -----------------------------------------------------------------------
+    anchor = obs.wall_points.mean(axis=0)
+    if len(models) == 0:
+        return LocalizationResult([], {"model_estimation": t1 - t0, "scoring": 0.0, "refinement": 0.0}, 0)
+    sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing)
+    ranking = rank_coarse_to_fine(floorplan, obs, models, sparse, anchor, cfg.scoring)
+    t2 = time.perf_counter()
+
+    # ---- refinement --------------------------------------------------------------------
+    top = ranking.index
+    cand = models[top].copy()
+    total = ranking.scores.total.copy()
+    cc = ranking.scores.consistency.copy()
+    cv = ranking.scores.violation.copy()
+    n_refine = min(cfg.refine.top_n, len(top))
+    scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
+    if n_refine:
+        refined = np.array([refine(floorplan, obs.wall_points, cand[i], cfg.refine, cfg.scale_mode, scale_bounds) for i in range(n_refine)])
+        rescored = score_hypotheses(floorplan, obs, refined, cfg.scoring)
+        better = rescored.total >= total[:n_refine]  # keep a refinement only if it does not hurt C
+        cand[:n_refine][better] = refined[better]
+        total[:n_refine][better] = rescored.total[better]
+        cc[:n_refine][better] = rescored.consistency[better]
+        cv[:n_refine][better] = rescored.violation[better]
+    order = np.argsort(-total, kind="stable")
+    keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
+    t3 = time.perf_counter()
+
+    hypotheses = [
+        Hypothesis(Sim2(cand[i, 3], cand[i, 2], (cand[i, 0], cand[i, 1])), float(total[i]), float(cc[i]), float(cv[i]), str(labels_arr[top[i]]))
+        for i in keep
+    ]
+    timings = {"model_estimation": t1 - t0, "scoring": t2 - t1, "refinement": t3 - t2}
+    return LocalizationResult(hypotheses, timings, int(len(models)))

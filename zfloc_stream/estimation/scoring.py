@@ -1,0 +1,347 @@
+"""Hypothesis scoring (paper 3.3): C = Cc - Cv, ranked coarse to fine.
+
+Models are rows (tx, ty, theta, s) of x' = s R x + t (BEV -> floorplan).
+
+Cc (consistency): fraction of transformed BEV wall points whose wall distance f^c (the
+floorplan's precomputed distance field) is below tau_c.
+Cv (violation): floorplan wall points mapped back into the BEV by the inverse transform;
+of those landing in observed free space, the fraction whose clearance f^v exceeds tau_v
+(a wall where the sensor saw open floor). No floorplan wall in free space: Cv = 0.
+
+Coarse to fine: every hypothesis is first ranked by Cc on a few points sampled along the
+BEV lines, with a nearest-cell lookup in a precomputed boolean "near a wall" grid (the
+cheapest possible test, ~10 array operations per point). The best top_k DISTINCT
+hypotheses (greedy non-maximum suppression on the implied pose of the BEV centroid) are
+then re-ranked with the full score: bilinear f^c on all BEV wall points, and Cv.
+Everything is vectorised over hypotheses, in chunks of at most chunk_size
+(hypotheses x points) elements to bound memory.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from ..config import ScoringSettings
+from ..geometry import LineSet
+from ..observation import BevObservation
+from ..sim2 import wrap_angle
+
+# --------------------------------------------------------------------------------------
+# transforms
+# --------------------------------------------------------------------------------------
+
+
+def transform_points(models: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(H, N, 2): every point mapped by every model."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    a = models[:, 3] * np.cos(models[:, 2])
+    b = models[:, 3] * np.sin(models[:, 2])
+    x = a[:, None] * p[None, :, 0] - b[:, None] * p[None, :, 1] + models[:, 0, None]
+    y = b[:, None] * p[None, :, 0] + a[:, None] * p[None, :, 1] + models[:, 1, None]
+    return np.stack([x, y], axis=-1)
+
+
+def implied_poses(models: np.ndarray, anchor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Floorplan position of the BEV point `anchor` under each model, and the heading."""
+    return transform_points(models, np.asarray(anchor, dtype=float).reshape(1, 2))[:, 0], np.asarray(models)[:, 2]
+
+
+def _chunks(n_models: int, n_points: int, chunk_size: int):
+    step = max(1, chunk_size // max(n_points, 1))
+    for lo in range(0, n_models, step):
+        yield slice(lo, min(lo + step, n_models))
+
+
+# --------------------------------------------------------------------------------------
+# floorplan-side precomputation (cached per floorplan object)
+# --------------------------------------------------------------------------------------
+
+
+class FloorplanScorer:
+    """Floorplan data the scores read, built once per (floorplan, tau_c)."""
+
+    def __init__(self, floorplan, settings: ScoringSettings):
+        self.floorplan = floorplan
+        field = np.asarray(floorplan.distance_field)
+        self.shape = field.shape
+        self.origin = np.asarray(floorplan.origin, dtype=float)
+        self.resolution = float(floorplan.resolution)
+        # Boolean "within tau_c of a wall" per cell, for the coarse nearest-cell test.
+        self.near_wall = np.ascontiguousarray(field < settings.tau_c).ravel()
+        # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
+        # under a hypothesis' footprint are a few contiguous index ranges.
+        walls = np.asarray(floorplan.sample_wall_points(), dtype=float).reshape(-1, 2)
+        self.bucket = float(settings.wall_bucket_size)
+        self.bucket_origin = walls.min(axis=0) if len(walls) else np.zeros(2)
+        cells = np.floor((walls - self.bucket_origin) / self.bucket).astype(np.int64) if len(walls) else np.zeros((0, 2), np.int64)
+        self.bucket_shape = (int(cells[:, 1].max()) + 1, int(cells[:, 0].max()) + 1) if len(walls) else (0, 0)
+        key = cells[:, 1] * self.bucket_shape[1] + cells[:, 0]
+        order = np.argsort(key, kind="stable")
+        self.wall_points = walls[order]
+        counts = np.bincount(key, minlength=self.bucket_shape[0] * self.bucket_shape[1])
+        self.bucket_start = np.concatenate([[0], np.cumsum(counts)])  # points of bucket b: [start[b], start[b + 1])
+
+    def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
+        """Cc by nearest-cell lookup in the near-wall grid (points outside the grid count
+        as far from any wall)."""
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0 or len(models) == 0:
+            return out
+        h, w = self.shape
+        px = np.asarray(points[:, 0], dtype=np.float32)
+        py = np.asarray(points[:, 1], dtype=np.float32)
+        inv = 1.0 / self.resolution
+        for sl in _chunks(len(models), len(points), chunk_size):
+            m = models[sl]
+            # fold the grid's origin and resolution into the model: u, v in cell units
+            a = (m[:, 3] * np.cos(m[:, 2]) * inv).astype(np.float32)[:, None]
+            b = (m[:, 3] * np.sin(m[:, 2]) * inv).astype(np.float32)[:, None]
+            cu = ((m[:, 0] - self.origin[0]) * inv).astype(np.float32)[:, None]
+            cv = ((m[:, 1] - self.origin[1]) * inv).astype(np.float32)[:, None]
+            u = a * px - b * py + cu
+            v = b * px + a * py + cv
+            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+            col = np.clip(u, 0, w - 1).astype(np.int64)
+            row = np.clip(v, 0, h - 1).astype(np.int64)
+            hit = self.near_wall[row * w + col] & inside
+            out[sl] = hit.mean(axis=1)
+        return out
+
+    def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
+        """Cc with the floorplan's bilinear f^c lookup."""
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0:
+            return out
+        for sl in _chunks(len(models), len(points), chunk_size):
+            q = transform_points(models[sl], points)
+            f = self.floorplan.distance(q.reshape(-1, 2)).reshape(q.shape[:2])
+            out[sl] = (f < tau_c).mean(axis=1)
+        return out
+
+    def points_in_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Floorplan wall points in the buckets overlapping each axis-aligned box
+        (lo, hi: (H, 2)): (owner box (P,), point index (P,)). A superset of the points
+        inside each box, which is all the violation test needs."""
+        nr, nc = self.bucket_shape
+        if nr == 0 or len(lo) == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        c0 = np.clip(np.floor((lo[:, 0] - self.bucket_origin[0]) / self.bucket), 0, nc - 1).astype(np.int64)
+        c1 = np.clip(np.floor((hi[:, 0] - self.bucket_origin[0]) / self.bucket), 0, nc - 1).astype(np.int64)
+        r0 = np.clip(np.floor((lo[:, 1] - self.bucket_origin[1]) / self.bucket), 0, nr - 1).astype(np.int64)
+        r1 = np.clip(np.floor((hi[:, 1] - self.bucket_origin[1]) / self.bucket), 0, nr - 1).astype(np.int64)
+        empty = (hi[:, 0] < self.bucket_origin[0]) | (hi[:, 1] < self.bucket_origin[1])
+        n_rows = np.where(empty, 0, r1 - r0 + 1)
+        # one contiguous index range per (box, bucket row)
+        box = np.repeat(np.arange(len(lo)), n_rows)
+        row = r0[box] + (np.arange(n_rows.sum()) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows))
+        begin = self.bucket_start[row * nc + c0[box]]
+        end = self.bucket_start[row * nc + c1[box] + 1]
+        length = end - begin
+        owner = np.repeat(box, length)
+        index = np.repeat(begin - (np.cumsum(length) - length), length) + np.arange(length.sum())
+        return owner, index
+
+    def violation(self, models: np.ndarray, bev: "BevView", tau_v: float, chunk_size: int) -> np.ndarray:
+        """Cv: floorplan wall points under the mapped BEV footprint, pulled back into the
+        BEV by the inverse transform; of those in observed free space, the fraction whose
+        clearance exceeds tau_v (precomputed per BEV cell in bev.state)."""
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(self.wall_points) == 0 or len(models) == 0 or bev.radius <= 0:
+            return out
+        centres = transform_points(models, bev.centre[None])[:, 0]
+        reach = models[:, 3] * bev.radius
+        step = max(1, chunk_size // max(len(self.wall_points), 1))
+        h, w = bev.state.shape
+        flat_state = bev.state.ravel()
+        for lo in range(0, len(models), step):
+            sl = slice(lo, min(lo + step, len(models)))
+            owner, index = self.points_in_boxes(centres[sl] - reach[sl, None], centres[sl] + reach[sl, None])
+            if len(owner) == 0:
+                continue
+            q = self.wall_points[index]
+            m = models[sl][owner]
+            # inverse transform into BEV cell units: x = R^T (x' - t) / s, then the grid
+            c, sn = np.cos(m[:, 2]), np.sin(m[:, 2])
+            k = 1.0 / (m[:, 3] * bev.resolution)
+            dx, dy = q[:, 0] - m[:, 0], q[:, 1] - m[:, 1]
+            u = (c * dx + sn * dy) * k - bev.origin_cells[0]
+            v = (-sn * dx + c * dy) * k - bev.origin_cells[1]
+            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+            cell = np.clip(v, 0, h - 1).astype(np.int64) * w + np.clip(u, 0, w - 1).astype(np.int64)
+            state = np.where(inside, flat_state[cell], 0)
+            n = sl.stop - sl.start
+            n_free = np.bincount(owner, weights=state > 0, minlength=n)
+            n_bad = np.bincount(owner, weights=state > 1, minlength=n)
+            out[sl] = np.where(n_free > 0, n_bad / np.maximum(n_free, 1), 0.0)
+        return out
+
+
+_SCORERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
+    """The cached FloorplanScorer of this floorplan object (rebuilt if settings changed)."""
+    key = (settings.tau_c, settings.wall_bucket_size)
+    try:
+        cached = _SCORERS.get(floorplan)
+    except TypeError:  # not weak-referenceable / hashable: no caching
+        return FloorplanScorer(floorplan, settings)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    scorer = FloorplanScorer(floorplan, settings)
+    try:
+        _SCORERS[floorplan] = (key, scorer)
+    except TypeError:
+        pass
+    return scorer
+
+
+# --------------------------------------------------------------------------------------
+# BEV-side helpers
+# --------------------------------------------------------------------------------------
+
+
+def sparse_line_points(lines: LineSet, spacing: float) -> np.ndarray:
+    """Points every `spacing` along each segment (at least its two ends)."""
+    if len(lines) == 0:
+        return np.zeros((0, 2))
+    e = lines.endpoints
+    counts = np.maximum(np.ceil(lines.lengths / spacing).astype(np.int64), 1) + 1
+    owner = np.repeat(np.arange(len(lines)), counts)
+    start = np.cumsum(counts) - counts
+    t = (np.arange(counts.sum()) - start[owner]) / (counts[owner] - 1)
+    return e[owner, 0] + t[:, None] * (e[owner, 1] - e[owner, 0])
+
+
+@dataclass(frozen=True)
+class BevView:
+    """What the scores read from one BEV observation, computed once per localization."""
+
+    wall_points: np.ndarray  # (N, 2)
+    state: np.ndarray  # (H, W) int8: 0 not observed free, 1 free, 2 free with clearance > tau_v
+    origin_cells: np.ndarray  # (2,) BEV origin in cell units
+    resolution: float
+    centre: np.ndarray  # (2,) centre of a disc covering every free cell
+    radius: float  # its radius (0: no free cell)
+
+    @classmethod
+    def of(cls, obs: BevObservation, tau_v: float) -> BevView:
+        free = np.asarray(obs.free, dtype=bool)
+        # f^v as used here: distance to the nearest cell that is NOT observed free
+        # (occupied or unknown), i.e. min(obs.clearance, depth into the free region).
+        # The paper measures to occupied cells only; but a wall seen at grazing incidence
+        # gets hits far apart while free space reaches it between them, so occupied-only
+        # clearance flags the true wall as a violation. Depth into free space does not.
+        depth = distance_transform_edt(free) * obs.resolution
+        deep = free & (np.minimum(np.asarray(obs.clearance), depth) > tau_v)
+        state = (free.astype(np.int8) + deep).astype(np.int8)
+        rows, cols = np.nonzero(free)
+        if len(rows):
+            lo = obs.origin + obs.resolution * np.array([cols.min(), rows.min()])
+            hi = obs.origin + obs.resolution * np.array([cols.max() + 1, rows.max() + 1])
+            centre, radius = 0.5 * (lo + hi), float(0.5 * np.linalg.norm(hi - lo) + obs.resolution)
+        else:
+            centre, radius = np.zeros(2), 0.0
+        origin_cells = np.asarray(obs.origin, dtype=float) / obs.resolution
+        return cls(obs.wall_points, state, origin_cells, float(obs.resolution), centre, radius)
+
+
+# --------------------------------------------------------------------------------------
+# scores and ranking
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Full scores of a set of hypotheses."""
+
+    total: np.ndarray  # C = Cc - Cv
+    consistency: np.ndarray  # Cc
+    violation: np.ndarray  # Cv
+
+
+def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings: ScoringSettings = ScoringSettings()) -> Scores:
+    """Full C = Cc - Cv of every model on all BEV wall points."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
+    scorer = floorplan_scorer(floorplan, settings)
+    cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
+    cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size)
+    return Scores(cc - cv, cc, cv)
+
+
+def distinct(models: np.ndarray, anchor: np.ndarray, settings: ScoringSettings, limit: int | None = None) -> np.ndarray:
+    """Indices (in the given order, which must be best first) of hypotheses kept by greedy
+    suppression: a hypothesis is dropped when a better kept one implies a BEV-anchor
+    position within distinct_translation AND a heading within distinct_angle_deg."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    n = len(models)
+    limit = n if limit is None else int(limit)
+    if n == 0 or limit <= 0:
+        return np.zeros(0, dtype=np.int64)
+    pos, ang = implied_poses(models, anchor)
+    max_angle = np.deg2rad(settings.distinct_angle_deg)
+    # Greedy suppression in order never looks ahead, so running it on a prefix gives the
+    # same first survivors as on the whole list: grow the prefix only when it runs dry.
+    block = min(n, max(256, 16 * limit))
+    while True:
+        kept = _greedy_distinct(pos[:block], ang[:block], settings.distinct_translation, max_angle, limit)
+        if len(kept) >= limit or block >= n:
+            return kept
+        block = min(n, 4 * block)
+
+
+def _greedy_distinct(pos, ang, max_distance, max_angle, limit) -> np.ndarray:
+    alive = np.ones(len(pos), dtype=bool)
+    kept: list[int] = []
+    while len(kept) < limit:
+        candidates = np.flatnonzero(alive)
+        if len(candidates) == 0:
+            break
+        i = int(candidates[0])
+        kept.append(i)
+        rest = candidates[1:]
+        near = (np.hypot(pos[rest, 0] - pos[i, 0], pos[rest, 1] - pos[i, 1]) < max_distance) & (
+            np.abs(wrap_angle(ang[rest] - ang[i])) < max_angle
+        )
+        alive[i] = False
+        alive[rest[near]] = False
+    return np.array(kept, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Ranking:
+    """top_k distinct hypotheses re-ranked by the full score (best first)."""
+
+    index: np.ndarray  # indices into the scored models
+    scores: Scores
+    coarse: np.ndarray  # coarse Cc of every input model
+
+
+def rank_coarse_to_fine(
+    floorplan,
+    obs: BevObservation | BevView,
+    models: np.ndarray,
+    sparse_points: np.ndarray,
+    anchor: np.ndarray,
+    settings: ScoringSettings = ScoringSettings(),
+) -> Ranking:
+    """Coarse Cc on sparse line points for all models, full C on the top_k distinct."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
+    scorer = floorplan_scorer(floorplan, settings)
+    points = sparse_points if len(sparse_points) else bev.wall_points
+    coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
+    order = np.argsort(-coarse, kind="stable")
+    top = order[distinct(models[order], anchor, settings, settings.top_k)]
+    scores = score_hypotheses(floorplan, bev, models[top], settings)
+    best = np.argsort(-scores.total, kind="stable")
+    return Ranking(top[best], Scores(scores.total[best], scores.consistency[best], scores.violation[best]), coarse)
