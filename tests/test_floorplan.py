@@ -36,6 +36,28 @@ def test_ros_round_trip(tmp_path, room):
     assert np.array_equal(img == 0, room.occupied[::-1])
 
 
+def test_ros_round_trip_negated(tmp_path, room):
+    """The same map written with negate=1 (inverted image) reads back identically."""
+    path = room.write_ros(tmp_path, "plan")
+    img = cv2.imread(str(tmp_path / "plan.png"), cv2.IMREAD_GRAYSCALE)
+    cv2.imwrite(str(tmp_path / "neg.png"), 255 - img)
+    meta = yaml.safe_load(path.read_text())
+    meta.update(image="neg.png", negate=1)
+    (tmp_path / "neg.yaml").write_text(yaml.safe_dump(meta))
+    back = Floorplan.load(tmp_path / "neg.yaml")
+    assert np.array_equal(back.occupied, room.occupied)
+    assert np.array_equal(back.lines.endpoints, room.lines.endpoints)
+
+
+def test_floorplan_pickles(room):
+    import pickle
+
+    back = pickle.loads(pickle.dumps(room))
+    assert np.array_equal(back.occupied, room.occupied) and len(back.lines) == len(room.lines)
+    q = np.array([[0.3, 3.1], [10.0, 10.0]])
+    assert np.array_equal(back.distance(q), room.distance(q))
+
+
 def _write_ros(tmp_path, img, **meta):
     cv2.imwrite(str(tmp_path / "m.pgm"), img)
     data = {"image": "m.pgm", "resolution": 0.1, "origin": [1.0, -2.0, 0.0], "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196}

@@ -304,9 +304,12 @@ class Floorplan:
     def line_neighbour_matrix(self) -> np.ndarray:
         """(N, N) bool: segment-to-segment distance < neighbour_distance (diagonal False)."""
         e = self.lines.endpoints
-        if len(e) == 0:
-            return np.zeros((0, 0), dtype=bool)
-        near = _segment_distances(e[:, 0], e[:, 1], e[:, 0], e[:, 1]) < self.settings.floorplan.neighbour_distance
+        n = len(e)
+        near = np.zeros((n, n), dtype=bool)
+        block = 256  # rows per block: bounds the (block, N, 2) temporaries on big floorplans
+        for i in range(0, n, block):
+            d = _segment_distances(e[i : i + block, 0], e[i : i + block, 1], e[:, 0], e[:, 1])
+            near[i : i + block] = d < self.settings.floorplan.neighbour_distance
         np.fill_diagonal(near, False)
         return near
 
