@@ -33,11 +33,11 @@ def test_chunks_are_consecutive_non_overlapping_and_capped():
     assert {(c.start, c.stop) for c in cells if c.length == 15} == {(0, 15), (15, 30)}
 
 
-def test_same_results_in_process_with_one_and_with_two_workers(tmp_path):
+def test_same_results_in_process_with_one_worker_and_with_two_worker_processes(tmp_path):
     kwargs = dict(datasets=[GIBSON], lengths=[20], seeds=[0, 1], progress=False)
     serial = run_study(out_dir=tmp_path / "w0", workers=0, **kwargs)
-    one = run_study(out_dir=tmp_path / "w1", workers=1, **kwargs)
-    two = run_study(out_dir=tmp_path / "w2", workers=2, **kwargs)
+    one = run_study(out_dir=tmp_path / "w1", workers=1, processes=False, **kwargs)  # a thread worker
+    two = run_study(out_dir=tmp_path / "w2", workers=2, **kwargs)  # two worker processes
     assert len(serial.rows) == 4 and not any(r["error"] for r in serial.rows)
     assert _metrics(serial.rows) == _metrics(one.rows) == _metrics(two.rows)
     assert serial.summary == one.summary == two.summary
