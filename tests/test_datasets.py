@@ -256,3 +256,14 @@ def test_map_from_log_cli_bad_input_exits_2(tmp_path, capsys):
     assert main(["map-from-log", str(tmp_path / "missing.log"), "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("zfloc-stream: error:") for line in err)
+
+
+def test_gibson_fixture_localizes_end_to_end():
+    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.metrics import evaluate_run, position_errors
+
+    seq = detect_source(GIBSON / "Tinyroom", seed=0)
+    localizer = Localizer(seq.floorplan, load_settings(base_overrides=seq.settings_overrides))
+    poses = [localizer.push(frame).pose for frame in seq.frames()]
+    run = evaluate_run(position_errors(poses, seq.ground_truth), (1.0, 0.5))
+    assert run.success[0.5] and run.max_error < 0.3
