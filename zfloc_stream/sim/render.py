@@ -200,12 +200,24 @@ def _furniture_hits(origin, rays, furniture, K, T_world_cam, shape) -> tuple[np.
     return best, which
 
 
+_RAY_CACHE: dict = {}
+
+
 def pixel_rays(K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(H, W, 3) camera-frame rays K^-1 [u, v, 1] (z = 1, so ray parameter = z-depth)."""
-    h, w = shape
-    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    uv1 = np.stack([u, v, np.ones_like(u)], axis=-1)
-    return uv1 @ np.linalg.inv(K).T
+    """(3, H*W) camera-frame rays K^-1 [u, v, 1] (z = 1, so ray parameter = z-depth), pixel
+    centres at integer (u, v); memoised per (K, shape) since a sequence reuses one camera."""
+    key = (np.asarray(K, dtype=float).tobytes(), tuple(shape))
+    rays = _RAY_CACHE.get(key)
+    if rays is None:
+        h, w = shape
+        v, u = np.mgrid[0:h, 0:w].astype(float)
+        uv1 = np.stack([u.ravel(), v.ravel(), np.ones(h * w)])
+        rays = np.ascontiguousarray(np.linalg.inv(K) @ uv1)
+        rays.setflags(write=False)
+        if len(_RAY_CACHE) >= 8:
+            _RAY_CACHE.clear()
+        _RAY_CACHE[key] = rays
+    return rays
 
 
 def render(scene, T_world_cam, K, shape: tuple[int, int], max_range: float = 10.0,
@@ -220,22 +232,18 @@ def render(scene, T_world_cam, K, shape: tuple[int, int], max_range: float = 10.
     K = np.asarray(K, dtype=float)
     h, w = shape
     R, origin = T[:3, :3], T[:3, 3]
-    rays = pixel_rays(K, shape) @ R.T  # world-frame rays, z-depth parameterised
-    ray_len = np.linalg.norm(rays, axis=-1)
-    n_h = np.hypot(rays[..., 0], rays[..., 1])
-    H = scene.wall_height
+    rays = R @ pixel_rays(K, shape)  # (3, P) world-frame rays, z-depth parameterised
+    rx, ry, rz = rays
+    n_h = np.hypot(rx, ry)
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_floor = np.where(rays[..., 2] < -_TINY, -origin[2] / rays[..., 2], np.inf)
-        t_ceil = np.where(rays[..., 2] > _TINY, (H - origin[2]) / rays[..., 2], np.inf)
-
-    # --- walls and pillars ----------------------------------------------------------------
+    # --- walls and pillars: cull, cast the azimuth fan, per pixel interpolate/intersect ------
     prims = VerticalPrimitives.of(scene)
     o2 = origin[:2]
     rel = prims.centers - o2
     dist = np.hypot(rel[:, 0], rel[:, 1])
     fwd = np.arctan2(R[1, 2], R[0, 2]) if np.hypot(R[0, 2], R[1, 2]) > 1e-9 else 0.0
-    az = wrap_angle(np.arctan2(rays[..., 1], rays[..., 0]) - fwd)
+    az = np.arctan2(ry, rx) - fwd
+    az = (az + np.pi) % (2 * np.pi) - np.pi
     a_lo, a_hi = float(az.min()), float(az.max())
     a_mid, a_half = 0.5 * (a_lo + a_hi), 0.5 * (a_hi - a_lo)
     radius = prims.bounding_radius
@@ -246,12 +254,13 @@ def render(scene, T_world_cam, K, shape: tuple[int, int], max_range: float = 10.
                                   <= a_half + spread + 1e-3)
     prims = prims.subset(np.nonzero(in_range & in_view)[0])
 
-    unit_h = np.stack([rays[..., 0], rays[..., 1]], axis=-1) / np.maximum(n_h, _TINY)[..., None]
-    flat_dirs = unit_h.reshape(-1, 2)
+    def horizontal_dirs(index=slice(None)):
+        return np.stack([rx[index], ry[index]], axis=1) / np.maximum(n_h[index], _TINY)[:, None]
+
     if len(prims.kind) == 0:
-        s_vert = np.full(shape, np.inf)
+        s_vert = np.full(h * w, np.inf)
     elif brute_force:
-        s_vert = _fan_distances(o2, flat_dirs, prims).min(axis=1).reshape(shape)
+        s_vert = _fan_distances(o2, horizontal_dirs(), prims).min(axis=1)
     else:
         step = 1.0 / (K[0, 0] * fan_oversampling)  # rad per fan ray: a fraction of a pixel
         n_fan = int(np.ceil((a_hi - a_lo) / step)) + 2
@@ -261,37 +270,51 @@ def render(scene, T_world_cam, K, shape: tuple[int, int], max_range: float = 10.
         nearest = np.argmin(s_fan, axis=1)  # (n_fan,)
         fan_rows = np.arange(n_fan)
         s_near, face_near = s_fan[fan_rows, nearest], face_fan[fan_rows, nearest]
-        pos = (az.ravel() - a_lo) / step
-        b0 = np.clip(np.floor(pos).astype(int), 0, n_fan - 2)
+        pos = (az - a_lo) / step
+        b0 = np.minimum(pos.astype(np.int64), n_fan - 2)  # pos >= 0: truncation = floor
         frac = pos - b0
         # Between two fan rays hitting the same face, distance is smooth in azimuth and the
         # fan is a fraction of a pixel apart: interpolate. Elsewhere (edges, corners,
         # occlusion boundaries) intersect both candidate primitives exactly.
-        s_flat = (1.0 - frac) * s_near[b0] + frac * s_near[b0 + 1]
-        edge = np.nonzero((face_near[b0] != face_near[b0 + 1]) | ~np.isfinite(s_flat))[0]
+        s0, s1 = s_near[b0], s_near[b0 + 1]
+        with np.errstate(invalid="ignore"):  # inf - inf where a fan ray misses: exact below
+            s_vert = s0 + frac * (s1 - s0)
+        edge = np.nonzero((face_near[b0] != face_near[b0 + 1]) | ~np.isfinite(s_vert))[0]
         if len(edge):
-            d_edge = flat_dirs[edge]
-            s_edge = np.minimum(_ray_distances(o2, d_edge, nearest[b0[edge]], prims),
-                                _ray_distances(o2, d_edge, nearest[b0[edge] + 1], prims))
-            s_flat[edge] = s_edge
-        s_vert = s_flat.reshape(shape)
+            d_edge = horizontal_dirs(edge)
+            s_vert[edge] = np.minimum(_ray_distances(o2, d_edge, nearest[b0[edge]], prims),
+                                      _ray_distances(o2, d_edge, nearest[b0[edge] + 1], prims))
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_vert = np.where(n_h > _TINY, s_vert / n_h, np.inf)
+        t = s_vert / n_h  # n_h = 0 (straight up/down): inf, the floor or ceiling wins
+        # --- floor / ceiling -------------------------------------------------------------------
+        down = rz < 0
+        t_fc = np.where(down, -origin[2] / rz, (scene.wall_height - origin[2]) / rz)
+    labels = np.full(h * w, WALL, dtype=np.uint8)
+    closer = t_fc < t
+    t = np.where(closer, t_fc, t)
+    labels[closer] = np.where(down[closer], FLOOR, CEILING)
 
     # --- furniture -------------------------------------------------------------------------
     furn = scene.furniture
     near = np.nonzero(np.hypot(furn[:, 0] - o2[0], furn[:, 1] - o2[1])
                       - 0.5 * np.hypot(furn[:, 2], furn[:, 3]) < max_range)[0]
-    t_furn, furn_row = _furniture_hits(origin, rays, furn[near], K, T, shape)
+    t = t.reshape(shape)
+    labels = labels.reshape(shape)
+    furn_row = None
+    if len(near):
+        t_furn, furn_row = _furniture_hits(origin, rays.T.reshape(h, w, 3), furn[near], K, T, shape)
+        closer = t_furn < t
+        t = np.where(closer, t_furn, t)
+        labels[closer] = OTHER
 
-    candidates = np.stack([t_vert, t_floor, t_ceil, t_furn])  # order = label table below
-    which = np.argmin(candidates, axis=0)
-    t = np.take_along_axis(candidates, which[None], axis=0)[0]
-    labels = np.array([WALL, FLOOR, CEILING, OTHER], dtype=np.uint8)[which]
-    beyond = ~np.isfinite(t) | (t * ray_len > max_range)
+    ray_len = np.sqrt(n_h * n_h + rz * rz).reshape(shape)
+    beyond = ~(t * ray_len <= max_range)  # also catches inf / nan
     depth = np.where(beyond, 0.0, t).astype(np.float32)
     labels[beyond] = UNKNOWN
     if return_furniture_index:
-        index = np.where((labels == OTHER) & (furn_row >= 0), near[np.maximum(furn_row, 0)], -1)
+        index = np.full(shape, -1, dtype=np.int64)
+        if furn_row is not None:
+            seen = (labels == OTHER) & (furn_row >= 0)
+            index[seen] = near[furn_row[seen]]
         return depth, labels, index
     return depth, labels
