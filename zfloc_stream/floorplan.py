@@ -6,8 +6,13 @@ Images on disk follow their own convention: ROS map_server PNG/PGM row 0 = large
 (flipped on load and on write); Gibson(t)/F3Loc map.png rows grow with y (no flip).
 
 Derived once at construction: wall points, the distance field f^c (metres to the nearest
-wall cell, exact Euclidean) with a bilinear lookup, line and circle primitives extracted
-by the same code as the BEV, and line neighbourhoods for 3L pruning.
+wall cell centre, exact Euclidean) with a bilinear lookup, line and circle primitives
+extracted by the same code as the BEV, and line neighbourhoods for 3L pruning.
+
+Primitives come from wall *faces* (wall cells next to a non-wall cell), since a BEV sees
+wall surfaces, not the inside of thick walls: each face of a thick wall gives its own line,
+and faces closer than dedup_offset (thin walls) merge into one. Circles are looked for only
+in isolated wall blobs no wider than a pillar.
 """
 
 from __future__ import annotations

@@ -16,6 +16,9 @@ from .floorplan import Floorplan
 from .frames import LaserFrame
 
 
+MAX_CROSSINGS_PER_CHUNK = 2_000_000  # memory bound of one traversal batch (not a tuning knob)
+
+
 @dataclass(frozen=True)
 class ScanResult:
     ranges: np.ndarray  # (n,) measured ranges (noise/outliers applied); inf where no hit
@@ -104,7 +107,11 @@ def cast_rays(
     angles = beam_angles(float(fov), int(n_beams))
     world = pose[2] + angles
     directions = np.stack([np.cos(world), np.sin(world)], axis=1)
-    true = trace(floorplan, pose[:2], directions, float(max_range))
+    # Beams in chunks: a beam holds ~2 * max_range / resolution crossings, so this bounds
+    # the temporaries on fine grids with long ranges.
+    per_beam = 2 * (int(np.ceil(max_range / floorplan.resolution)) + 2)
+    chunk = max(1, MAX_CROSSINGS_PER_CHUNK // per_beam)
+    true = np.concatenate([trace(floorplan, pose[:2], directions[i : i + chunk], float(max_range)) for i in range(0, len(directions), chunk)])
     hit = np.isfinite(true)
     ranges = true.copy()
     outlier = np.zeros(len(ranges), dtype=bool)
