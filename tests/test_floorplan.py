@@ -246,7 +246,9 @@ def test_sample_wall_points_thins(room):
     dense = room.sample_wall_points(0.05)
     sparse = room.sample_wall_points(0.2)
     assert 0 < len(sparse) < len(dense) <= len(room.wall_points)
-    assert len(room.sample_wall_points(faces_only=False)) == len(room.wall_points)
+    # at the grid resolution every wall cell is its own sample
+    assert len(room.sample_wall_points(room.resolution, faces_only=False)) == len(room.wall_points)
+    assert len(room.sample_wall_points()) > 0  # default spacing from the settings
 
 
 def test_settings_are_used():

@@ -75,18 +75,20 @@ def _canonical(c: np.ndarray, direction: np.ndarray, t_lo: float, t_hi: float):
 
 
 def _connected_run(t: np.ndarray, t_ref: float, gap: float) -> np.ndarray | None:
-    """Indices into t of the run of values (consecutive spacing <= gap) closest to t_ref,
-    or None if that run is farther than gap from t_ref."""
+    """Indices into t of the run of values (consecutive spacing <= gap) holding the value
+    nearest t_ref, or None if that value is farther than gap from t_ref."""
     order = np.argsort(t, kind="stable")
     ts = t[order]
-    breaks = np.flatnonzero(np.diff(ts) > gap)
-    starts = np.concatenate(([0], breaks + 1))
-    ends = np.concatenate((breaks, [len(ts) - 1]))
-    away = np.maximum(0.0, np.maximum(ts[starts] - t_ref, t_ref - ts[ends]))
-    best = int(np.argmin(away))
-    if away[best] > gap:
+    n = len(ts)
+    k = int(np.searchsorted(ts, t_ref))
+    i = 0 if k == 0 else n - 1 if k == n else (k - 1 if t_ref - ts[k - 1] <= ts[k] - t_ref else k)
+    if abs(ts[i] - t_ref) > gap:
         return None
-    return order[starts[best] : ends[best] + 1]
+    breaks = np.flatnonzero(np.diff(ts) > gap)  # a run ends at each break index
+    j = int(np.searchsorted(breaks, i))  # runs before i's run
+    lo = breaks[j - 1] + 1 if j > 0 else 0
+    hi = breaks[j] if j < len(breaks) else n - 1
+    return order[lo : hi + 1]
 
 
 def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> LineSet:
@@ -117,11 +119,11 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
         # reaches the window's rim regrows over all free points.
         window = np.asarray(tree.query_ball_point(pts[seed], settings.local_radius, return_sorted=False), dtype=np.int64)
         window = window[~taken[window]]
-        support = _grow(pts[window], pts[neigh], pts[seed], settings)
+        rim = settings.local_radius - settings.gap
+        support = _grow(pts[window], pts[neigh], pts[seed], settings, rim)
         if support is not None:
             members = window[support]
-            reach2 = np.max(np.sum((pts[members] - pts[seed]) ** 2, axis=1))
-            if reach2 > (settings.local_radius - settings.gap) ** 2:
+            if np.max(np.sum((pts[members] - pts[seed]) ** 2, axis=1)) > rim * rim:
                 support = _grow(pool_pts, pts[members], pts[seed], settings)
                 members = None if support is None else pool[support]
         if support is None:
@@ -146,13 +148,14 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> L
     return lines.subset(np.argsort(-lines.lengths, kind="stable"))
 
 
-def _grow(pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSettings):
+def _grow(pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSettings, rim: float | None = None):
     """Indices into pool_pts of the converged support of the line grown from the points
     `initial`, anchored at seed_pt (the run of collinear points nearest the seed).
 
     Converged: the support stopped changing, or the refit moved the line by less than
     converge_tolerance over the support's extent (the next round would select the same
-    points, so it is skipped)."""
+    points, so it is skipped). With `rim`, growth also stops, unconverged, as soon as the
+    support reaches farther than rim from the seed (the caller regrows it more widely)."""
     c, direction = _pca_line(initial)
     previous = None
     for _ in range(settings.max_grow_iterations):
@@ -161,17 +164,20 @@ def _grow(pool_pts, initial: np.ndarray, seed_pt: np.ndarray, settings: LineSett
         if len(cand) < 2:
             return None
         t = pool_pts[cand] @ direction - c @ direction
-        run = _connected_run(t, float((seed_pt - c) @ direction), settings.gap)
+        t_seed = float((seed_pt - c) @ direction)
+        run = _connected_run(t, t_seed, settings.gap)
         if run is None or len(run) < 2:
             return None
         support = np.sort(cand[run])
         if previous is not None and len(support) == len(previous) and np.array_equal(support, previous):
             break
         previous = support
+        t_lo, t_hi = t[run].min(), t[run].max()
+        if rim is not None and max(t_seed - t_lo, t_hi - t_seed) > rim:
+            break
         new_c, new_direction = _pca_line(pool_pts[support])
         # Largest displacement of the line over the support's extent after the refit.
-        half = 0.5 * (t[run].max() - t[run].min())
-        shift = abs(float((new_c - c) @ normal)) + half * abs(float(new_direction @ normal))
+        shift = abs(float((new_c - c) @ normal)) + 0.5 * (t_hi - t_lo) * abs(float(new_direction @ normal))
         c, direction = new_c, new_direction
         if shift < settings.converge_tolerance:
             break
