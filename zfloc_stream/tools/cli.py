@@ -91,7 +91,7 @@ def cmd_demo(args) -> int:
     scene = build_scene(args.scene, seed=args.seed)
     sequence = simulate(scene, SimSettings(), seed=args.seed, n_frames=args.frames)
     outcome = run_session(
-        scene.floorplan, sequence.frames, settings, args.out, total=args.frames,
+        scene.floorplan, iter(sequence), settings, args.out, total=args.frames,
         progress=not args.no_progress, description=f"demo {args.scene}",
     )
     _report(outcome)

@@ -1,0 +1,130 @@
+"""The streaming localizer on simulated sequences: determinism, ambiguity in a symmetric
+building, kidnapping recovery, bad frames."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from zfloc_stream.config import Settings
+from zfloc_stream.frames import LaserFrame
+from zfloc_stream.localizer import Localizer
+from zfloc_stream.rng import make_rng
+from zfloc_stream.sim import build_scene
+from zfloc_stream.sim.simulator import SimSettings, simulate
+from zfloc_stream.sim.trajectory import trajectory_through
+
+
+def _run(scene, frames, settings=None):
+    loc = Localizer(scene.floorplan, settings or Settings())
+    return loc, [loc.push(f) for f in frames]
+
+
+def test_same_inputs_and_seed_give_identical_estimates():
+    scene = build_scene("rooms", seed=1)
+    seq = simulate(scene, SimSettings(), seed=1, n_frames=25)
+    _, a = _run(scene, seq)
+    _, b = _run(scene, seq)
+    for ea, eb in zip(a, b):
+        assert ea.status == eb.status
+        assert (ea.pose is None) == (eb.pose is None)
+        if ea.pose is not None:
+            assert np.array_equal(ea.pose, eb.pose)
+            assert np.array_equal(ea.covariance, eb.covariance)
+        assert len(ea.alternatives) == len(eb.alternatives)
+
+
+def test_every_frame_gets_a_pose_once_initialized():
+    scene = build_scene("apartment", seed=0)
+    seq = simulate(scene, SimSettings(), seed=0, n_frames=40)
+    _, est = _run(scene, seq)
+    first = next(i for i, e in enumerate(est) if e.pose is not None)
+    assert all(e.pose is not None for e in est[first:])
+    assert est[-1].status == "tracking"
+    err = np.linalg.norm(est[-1].pose[:2] - seq.poses[-1][:2])
+    assert err < 0.5
+
+
+def _mirror_pose(pose, centre):
+    """The symmetric scene's main part is point-symmetric about its centre."""
+    return np.array([2 * centre[0] - pose[0], 2 * centre[1] - pose[1], pose[2] + np.pi])
+
+
+def test_symmetric_building_is_ambiguous_until_the_distinguishing_part_is_seen():
+    scene = build_scene("symmetric", seed=0)
+    wp = scene.waypoints
+    rng = make_rng(0, "test", "symmetric")
+    path = trajectory_through(scene, [wp["symmetric_start"], wp["symmetric_end"], wp["distinguishing"]], rng)
+    seq = simulate(scene, SimSettings(), seed=0, trajectory=path)
+    lo, hi = scene.info["symmetric_x_range"]
+    margin = scene.info["sym_margin"]
+    in_symmetric = (seq.poses[:, 0] > lo + margin) & (seq.poses[:, 0] < hi - margin)
+    loc = Localizer(scene.floorplan, Settings())
+    saw_ambiguous_with_both = False
+    statuses = []
+    for k, frame in enumerate(seq):
+        est = loc.push(frame)
+        statuses.append(est.status)
+        if est.status == "ambiguous" and in_symmetric[k]:
+            true, mirror = seq.poses[k], _mirror_pose(seq.poses[k], scene.info["symmetry_center"])
+            alts = np.array([a.pose[:2] for a in est.alternatives])
+            if (np.linalg.norm(alts - true[:2], axis=1) < 1.0).any() and (np.linalg.norm(alts - mirror[:2], axis=1) < 1.0).any():
+                saw_ambiguous_with_both = True
+    assert saw_ambiguous_with_both, statuses
+    assert est.status == "tracking", statuses[-15:]
+    assert np.linalg.norm(est.pose[:2] - seq.poses[-1][:2]) < 1.0
+
+
+class _Kidnapped:
+    """Frames whose odometry jumps (a VIO reset) at frame k0 while the camera moves on."""
+
+    def __init__(self, seq, k0, yaw=1.0, shift=(4.0, -3.0)):
+        self.seq, self.k0 = seq, k0
+        c, s = np.cos(yaw), np.sin(yaw)
+        self.jump = np.eye(4)
+        self.jump[:2, :2] = [[c, -s], [s, c]]
+        self.jump[:2, 3] = shift
+
+    def __iter__(self):
+        for k, frame in enumerate(self.seq):
+            yield frame if k < self.k0 else replace(frame, T_odom_cam=self.jump @ frame.T_odom_cam)
+
+
+def test_kidnapping_is_detected_and_recovered_within_30_frames():
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=90)
+    k0 = 45
+    _, est = _run(scene, _Kidnapped(seq, k0))
+    assert est[k0 - 1].status == "tracking"
+    after = [e.status for e in est[k0:]]
+    assert "lost" in after[:30], after
+    err = np.array([np.inf if e.pose is None else np.linalg.norm(e.pose[:2] - p[:2]) for e, p in zip(est, seq.poses)])
+    recovered = next(k for k in range(k0, len(est)) if est[k].status == "tracking" and err[k] < 1.0)
+    assert recovered - k0 <= 30, (recovered, after)
+    assert (err[-10:] < 1.0).all()
+
+
+def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
+    scene = build_scene("rooms", seed=0)
+    seq = simulate(scene, SimSettings(), seed=0, n_frames=12)
+    loc = Localizer(scene.floorplan, Settings())
+    frames = list(seq)
+    for f in frames[:6]:
+        loc.push(f)
+    odd = LaserFrame(np.full(10, np.nan), 0.0, 0.1, 0.1, 10.0, np.eye(4), 99.0)  # no valid beam
+    est = loc.push(odd)
+    assert est.skipped
+    for f in frames[6:]:
+        est = loc.push(f)
+    assert est.skipped is None and loc.frames_fused == 11
+
+
+@pytest.mark.slow
+def test_symmetric_over_seeds():
+    for seed in range(3):
+        scene = build_scene("symmetric", seed=seed)
+        wp = scene.waypoints
+        path = trajectory_through(scene, [wp["symmetric_start"], wp["symmetric_end"], wp["distinguishing"]], make_rng(seed, "t"))
+        seq = simulate(scene, SimSettings(), seed=seed, trajectory=path)
+        _, est = _run(scene, seq)
+        assert est[-1].status == "tracking"
