@@ -145,3 +145,16 @@ def test_session_of_another_tool_replays_with_a_floorplan(tmp_path, capsys):
     assert "nothing to check" in capsys.readouterr().err
     assert main([str(out_path), "--check"]) == 0
     assert "identical: 10 frames checked" in capsys.readouterr().out
+
+
+def test_floorplan_built_with_other_settings_still_replays(tmp_path, capsys):
+    """The floorplan of a built-in scene has the default settings while the run uses
+    seed 5: its settings are logged so the replay rebuilds the same primitives."""
+    from zfloc_stream.config import load_settings
+
+    path = tmp_path / "seed5.mcap"
+    record_laser_session(path, 12, settings=load_settings(overrides=["seed=5"]))
+    session = read_session(path)
+    assert session.settings.seed == 5 and session.floorplan_settings.seed == 0
+    assert main([str(path), "--check"]) == 0
+    assert "identical: 12 frames checked" in capsys.readouterr().out

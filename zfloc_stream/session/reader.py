@@ -103,24 +103,27 @@ class Session:
         self.topics = topics  # from the summary; None when unknown (salvage, no summary)
         self.problems: list[str] = []  # why anything was dropped while reading
         self.settings_yaml: str | None = metadata.get(S.METADATA_SETTINGS, {}).get("yaml")
-        self.settings: Settings | None = self._parse_settings()
+        self.settings: Settings | None = self._parse_settings(S.METADATA_SETTINGS, "logged settings")
+        # the settings the floorplan was built with, logged only where they differ
+        self.floorplan_settings: Settings | None = self._parse_settings(S.METADATA_FLOORPLAN_SETTINGS, "logged floorplan settings")
         self._floorplan = None
 
     # --- contents -------------------------------------------------------------------------
-    def _parse_settings(self) -> Settings | None:
-        if self.settings_yaml is None:
+    def _parse_settings(self, record: str, what: str) -> Settings | None:
+        text = self.metadata.get(record, {}).get("yaml")
+        if text is None:
             return None
-        crc = self.metadata[S.METADATA_SETTINGS].get(S.CRC_KEY)
-        if crc is not None and crc != S.crc32_hex(self.settings_yaml.encode("utf-8", "surrogateescape")):
-            raise SessionLogError(f"{self.path}: logged settings are damaged (checksum mismatch)")
+        crc = self.metadata[record].get(S.CRC_KEY)
+        if crc is not None and crc != S.crc32_hex(text.encode("utf-8", "surrogateescape")):
+            raise SessionLogError(f"{self.path}: {what} are damaged (checksum mismatch)")
         try:
-            data = yaml.safe_load(self.settings_yaml)
+            data = yaml.safe_load(text)
         except yaml.YAMLError:
-            raise SessionLogError(f"{self.path}: logged settings are not valid YAML") from None
+            raise SessionLogError(f"{self.path}: {what} are not valid YAML") from None
         if not isinstance(data, dict):
-            raise SessionLogError(f"{self.path}: logged settings are not a mapping")
+            raise SessionLogError(f"{self.path}: {what} are not a mapping")
         try:
-            return settings_from_dict(data, source=f"{self.path} (logged settings)")
+            return settings_from_dict(data, source=f"{self.path} ({what})")
         except ZflocError as err:
             raise SessionLogError(str(err)) from None
 
@@ -135,10 +138,10 @@ class Session:
 
     @property
     def floorplan(self):
-        """The embedded floorplan built with the logged settings (None when the file
+        """The embedded floorplan built as in the recorded run (None when the file
         carries none)."""
         if self._floorplan is None and self.floorplan_files:
-            self._floorplan = self.load_floorplan(self.settings)
+            self._floorplan = self.load_floorplan(self.floorplan_settings or self.settings)
         return self._floorplan
 
     def load_floorplan(self, settings: Settings | None = None):

@@ -67,10 +67,10 @@ class ReplayResult:
 
 
 # --- settings -------------------------------------------------------------------------------
-def replay_settings(session: Session, config: str | Path | None = None, overrides: list[str] | None = None) -> Settings:
-    """The session's logged settings (defaults if it has none), then a YAML file, then
-    dotted.key=value overrides."""
-    base = session.settings or Settings()
+def replay_settings(session: Session, config: str | Path | None = None, overrides: list[str] | None = None, base: Settings | None = None) -> Settings:
+    """The session's logged settings (defaults if it has none; or `base`), then a YAML
+    file, then dotted.key=value overrides."""
+    base = base or session.settings or Settings()
     data = base.model_dump()
     source = f"{session.path} (logged settings)"
     if config is not None:

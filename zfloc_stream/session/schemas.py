@@ -60,6 +60,7 @@ RANGE_MAX_KEY = "range_max"
 # Metadata record names and attachment prefix inside a session file
 METADATA_SETTINGS = "zfloc/settings"  # {"yaml": dump_settings(...)}
 METADATA_SESSION = "zfloc/session"  # {"format": ..., "sensor": ..., user keys}
+METADATA_FLOORPLAN_SETTINGS = "zfloc/floorplan_settings"  # {"yaml", "crc32"} where they differ
 METADATA_CHECKSUMS = "zfloc/checksums"  # {attachment name: crc32 hex}
 CRC_KEY = "crc32"  # in METADATA_SETTINGS: crc32 hex of the YAML text
 ATTACHMENT_FLOORPLAN_PREFIX = "floorplan/"

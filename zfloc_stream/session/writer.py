@@ -95,6 +95,12 @@ class SessionWriter:
         self._mcap.add_metadata(S.METADATA_SESSION, info)
         if floorplan is not None:
             self._attach_floorplan(floorplan)
+            # A floorplan built with other settings (seed, primitive parameters) has other
+            # primitives: log its settings so a replay rebuilds the same one.
+            own = getattr(floorplan, "settings", None)
+            if isinstance(own, Settings) and own != settings:
+                text = dump_settings(own)
+                self._mcap.add_metadata(S.METADATA_FLOORPLAN_SETTINGS, {"yaml": text, S.CRC_KEY: S.crc32_hex(text.encode())})
         self._file.flush()
 
     # --- context manager ---------------------------------------------------------------

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -98,7 +99,9 @@ def run(args) -> int:
     if args.floorplan is not None:
         floorplan = Floorplan.load(args.floorplan, settings=settings)
     else:
-        floorplan = session.load_floorplan(settings)
+        # built as in the recorded run (its own logged settings, if any) + the same overrides
+        plan_settings = settings if session.floorplan_settings is None else replay_settings(session, args.config, args.set, base=session.floorplan_settings)
+        floorplan = session.load_floorplan(plan_settings)
         if floorplan is None:
             raise SessionLogError(f"{session.path}: the session carries no floorplan: pass --floorplan map.yaml")
     if session.settings is None:
@@ -153,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("zfloc-replay: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into e.g. head: not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
 
 
 if __name__ == "__main__":
