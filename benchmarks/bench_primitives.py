@@ -80,7 +80,7 @@ def office_grid(size_m=50.0, res=0.05, room=5.0, thickness=0.15, door=1.0):
 def main():
     rng = np.random.default_rng(0)
     s = Settings()
-    for nx, ny in ((2, 3), (5, 4)):
+    for nx, ny in ((2, 3), (4, 3), (5, 4)):
         pts = bev_like_points(nx, ny, rng)
         dt, lines = timed(lambda: extract_lines(pts, s.primitives.lines, make_rng(0)))
         dc, circles = timed(lambda: extract_circles(pts, s.primitives.circles, make_rng(0)))
