@@ -53,6 +53,19 @@ def test_unknown_kind_and_malformed_spec_are_input_errors():
         open_dataset("sim:atlantis")
 
 
+# --- simulated scenes ----------------------------------------------------------------------
+def test_sim_sequences_render_chunks_lazily_and_deterministically():
+    settings = load_settings(overrides={"datasets": {"sim": {"n_frames": 20}}, "seed": 2})
+    rooms, hall = open_dataset("sim:rooms,hall", settings)
+    assert (rooms.name, rooms.n_frames, hall.name) == ("rooms", 20, "hall")
+    chunk = list(rooms.frames(5, 8))
+    assert len(chunk) == 3 and all(isinstance(f, CameraFrame) for f in chunk)
+    np.testing.assert_array_equal([f.ground_truth for f in chunk], rooms.ground_truth[5:8])
+    again = next(open_dataset("sim:rooms", settings)[0].frames(5, 6))
+    np.testing.assert_array_equal(again.depth, chunk[0].depth)
+    assert rooms.floorplan.name == "rooms"
+
+
 # --- Gibson(t) -----------------------------------------------------------------------------
 def test_gibson_fixture_loads_from_root_split_and_scene_folder():
     (seq,) = open_dataset(f"gibson:{GIBSON}")

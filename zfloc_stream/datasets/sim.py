@@ -3,8 +3,8 @@
 
 The building layout is fixed by datasets.sim.scene_seed; the walk, the sensor noise and
 the odometry drift are drawn from settings.seed, so a study's seeds are independent
-repetitions in the same buildings. A sequence simulates its datasets.sim.n_frames frames
-once per process, on first use (a study worker reuses them for every chunk).
+repetitions in the same buildings. A sequence of datasets.sim.n_frames frames renders each
+frame when it is read (zfloc_stream.sim.simulate), so a study chunk pays only for its own.
 """
 
 from __future__ import annotations
@@ -18,14 +18,14 @@ from ..errors import InputError
 from .base import Sequence, register
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=8)
 def _simulated(name: str, scene_seed: int, walk_seed: int, n_frames: int):
+    """(scene, SimSequence); the sequence renders a frame when it is read, identically in
+    any order, so a chunk costs only its own frames."""
     from ..sim import SimSettings, build_scene, simulate
 
     scene = build_scene(name, seed=scene_seed)
-    result = simulate(scene, SimSettings(), seed=walk_seed, n_frames=n_frames)
-    frames = list(getattr(result, "frames", result))
-    return scene, frames
+    return scene, simulate(scene, SimSettings(), seed=walk_seed, n_frames=n_frames)
 
 
 def scene_sequence(name: str, settings: Settings) -> Sequence:
@@ -33,16 +33,14 @@ def scene_sequence(name: str, settings: Settings) -> Sequence:
     key = (name, cfg.scene_seed, settings.seed, cfg.n_frames)
 
     def frames(start: int, stop: int):
-        return iter(_simulated(*key)[1][start:stop])
-
-    def truth():
-        return np.array([f.ground_truth for f in _simulated(*key)[1]], dtype=float)
+        simulated = _simulated(*key)[1]
+        return (simulated[k] for k in range(start, stop))
 
     return Sequence(
         name=name,
         frame_source=frames,
         n_frames=cfg.n_frames,
-        ground_truth=truth,
+        ground_truth=lambda: np.asarray(_simulated(*key)[1].poses, dtype=float),
         floorplan=lambda: _simulated(*key)[0].floorplan,
         source=f"sim:{name}",
     )
