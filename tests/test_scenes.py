@@ -180,3 +180,22 @@ def test_floorplan_and_ros_export(tmp_path, scenes):
     assert np.array_equal(np.asarray(fp.occupied), s.occupied)
     s.write_ros(tmp_path)
     assert list(tmp_path.glob("*.yaml")) and list(tmp_path.glob("*.png"))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_room_is_reachable_by_the_walk_planner(name, scenes):
+    from zfloc_stream.sim import plan_path
+
+    s = scenes[(name, 1)]
+    start = s.waypoints[s.rooms[0].name]
+    for room in s.rooms[1:]:
+        path = plan_path(s, start, s.waypoints[room.name])
+        assert s.is_free(path).all(), room.name
+
+
+@pytest.mark.parametrize("name", ["rooms", "apartment", "symmetric", "hall"])
+def test_more_seeds_stay_plausible(name):
+    for seed in range(2, 8):
+        s = build_scene(name, seed)
+        assert 0.75 * s.target_area <= s.floor_area <= 1.25 * s.target_area, seed
+        assert ndimage.label(s.free)[1] == 1, seed

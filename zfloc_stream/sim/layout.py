@@ -129,8 +129,10 @@ def build_walls(rooms: list[Room], connections: list[Connection], rng: np.random
                 exterior: float = 0.25, interior: float = 0.15, door_margin: float = 0.3):
     """Walls (as boxes) and doors of a room plan.
 
-    Returns (segments (N, 2, 2), thickness (N,), doors list[Door]). Each segment is the
-    centre line of a solid box of the given thickness.
+    Returns (segments (N, 2, 2), thickness (N,), doors list[Door], openings list[Door]).
+    Each segment is the centre line of a solid box of the given thickness; openings are the
+    wall-free spans of "open" connections (as Door records), so furnishing can keep them
+    clear like doors.
     """
     lines, coord = _room_edges(rooms)
     open_pairs = {frozenset((c.a, c.b)) for c in connections if c.kind == "open"}
@@ -177,6 +179,9 @@ def build_walls(rooms: list[Room], connections: list[Connection], rng: np.random
         xy = (centre, coord[(axis, k)]) if axis == "h" else (coord[(axis, k)], centre)
         doors.append(Door(xy, float(c.width), axis, (c.a, c.b)))
 
+    openings = [Door((0.5 * (lo + hi), coord[(axis, k)]) if axis == "h" else (coord[(axis, k)], 0.5 * (lo + hi)),
+                     hi - lo, axis, tuple(sorted(pair)))
+                for pair in open_pairs for axis, k, lo, hi in shared.get(pair, ())]
     segments, thickness = [], []
     for axis, k, lo, hi, t in walls:
         pieces = [(lo - t / 2, hi + t / 2)]
@@ -187,7 +192,7 @@ def build_walls(rooms: list[Room], connections: list[Connection], rng: np.random
             seg = [[a, c], [b, c]] if axis == "h" else [[c, a], [c, b]]
             segments.append(seg)
             thickness.append(t)
-    return np.asarray(segments, dtype=float).reshape(-1, 2, 2), np.asarray(thickness, dtype=float), doors
+    return np.asarray(segments, dtype=float).reshape(-1, 2, 2), np.asarray(thickness, dtype=float), doors, openings
 
 
 # --- rasterisation -----------------------------------------------------------------------

@@ -189,7 +189,7 @@ _WALL_ITEMS = (
 _FREE_ITEMS = (("table", 1.6, 0.9, 0.75), ("table_small", 1.2, 0.7, 0.75), ("crate", 0.8, 0.8, 1.0))
 
 
-def _door_keepouts(doors, depth: float = 1.3, side: float = 0.3) -> np.ndarray:
+def _door_keepouts(doors, depth: float = 1.5, side: float = 0.3) -> np.ndarray:
     """Axis-aligned (xmin, ymin, xmax, ymax) rectangles in front of every door."""
     out = []
     for d in doors:
@@ -213,7 +213,8 @@ def _overlaps(box, boxes: np.ndarray, gap: float = 0.0) -> bool:
 def _furnish(rooms: list[Room], doors, pillars: np.ndarray, rng,
              wall_kinds=("room",), free_kinds=("open", "hall")) -> np.ndarray:
     """Furniture boxes (K, 6): against the walls of ordinary rooms, and free-standing
-    tables far from everything in open areas, so that no door or passage gets blocked."""
+    tables far from everything in open areas, so that no door or passage gets blocked.
+    doors: every passage (doors and open spans) to keep clear."""
     keepouts = _door_keepouts(doors)
     placed: list[tuple] = []  # axis-aligned footprints, for overlap tests
     items: list[tuple] = []
@@ -222,7 +223,7 @@ def _furnish(rooms: list[Room], doors, pillars: np.ndarray, rng,
         x0, y0, x1, y1 = room.x0 + inset, room.y0 + inset, room.x1 - inset, room.y1 - inset
         small = min(x1 - x0, y1 - y0)
         if room.kind in wall_kinds:
-            max_depth = min(0.3 * small, 1.0)
+            max_depth = min(0.3 * small, 1.4)  # a bed fits in bigger rooms
             n_items = int(rng.integers(1, 2 + min(3, int(room.area // 8))))
             for _ in range(n_items):
                 for _try in range(20):
@@ -278,12 +279,13 @@ def _assemble(name: str, seed: int, rooms: list[Room], connections: list[Connect
               waypoints: dict | None = None, info: dict | None = None, doors=None, walls=None) -> Scene:
     """Walls from the plan, raster, interior and walkable masks, waypoints."""
     if walls is None:
-        segments, thickness, doors = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
+        segments, thickness, doors, openings = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
     else:
         segments, thickness = walls
+        openings = []
     pillars = np.asarray(pillars, dtype=float).reshape(-1, 3)
     if furniture is None:
-        furniture = _furnish(rooms, doors, pillars, rng)
+        furniture = _furnish(rooms, list(doors) + list(openings), pillars, rng)
     corners = np.array([[r.x0, r.y0] for r in rooms] + [[r.x1, r.y1] for r in rooms])
     grid = grid_around(corners, margin=1.0)
     occupied = rasterize_boxes(grid, *wall_boxes(segments, thickness))
@@ -550,7 +552,7 @@ def _gen_symmetric(seed: int) -> Scene:
                  half + q(rng.uniform(3.5, 4.5)) + c, hw + q(rng.uniform(2.0, 3.0)) + c)
     rooms.append(annex)
     connections.append(Connection(0, len(rooms) - 1, "open"))
-    segments, thickness, doors = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
+    segments, thickness, doors, _ = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
     # Furniture: furnish the south rooms, then mirror it into the north rooms through the
     # centre so that the symmetric part stays symmetric in 3D as well.
     south_rooms = [r for r in rooms if r.name.startswith("south")]
