@@ -49,7 +49,7 @@ from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2
 from .refine import refine
-from .scoring import rank_coarse_to_fine, score_hypotheses, sparse_line_points, distinct
+from .scoring import BevView, distinct, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
@@ -429,11 +429,6 @@ def localize(
     bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
     pool = solver_pool(cfg, bev, fp)
     warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
-    if not pool and not warm:
-        raise InputError(
-            f"not enough primitives for any enabled solver ({cfg.scale_mode} scale): BEV has {len(bev.lines)} lines / "
-            f"{len(bev.circles)} circles, floorplan {len(fp.lines)} lines / {len(fp.circles)} circles"
-        )
     blocks, labels = [], []
     if pool and iterations > 0:
         counts = np.bincount(rng.integers(len(pool), size=iterations), minlength=len(pool))
@@ -461,8 +456,9 @@ def localize(
     anchor = obs.wall_points.mean(axis=0)
     if len(models) == 0:
         return LocalizationResult([], {"model_estimation": t1 - t0, "scoring": 0.0, "refinement": 0.0}, 0)
-    sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing)
-    ranking = rank_coarse_to_fine(floorplan, obs, models, sparse, anchor, cfg.scoring)
+    sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
+    view = BevView.of(obs, cfg.scoring.tau_v)
+    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
     t2 = time.perf_counter()
 
     # ---- refinement --------------------------------------------------------------------
@@ -475,7 +471,7 @@ def localize(
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
         refined = np.array([refine(floorplan, obs.wall_points, cand[i], cfg.refine, cfg.scale_mode, scale_bounds) for i in range(n_refine)])
-        rescored = score_hypotheses(floorplan, obs, refined, cfg.scoring)
+        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
         better = rescored.total >= total[:n_refine]  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
         total[:n_refine][better] = rescored.total[better]

@@ -22,8 +22,8 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from ..config import ScoringSettings
 from ..geometry import LineSet
@@ -71,8 +71,16 @@ class FloorplanScorer:
         self.shape = field.shape
         self.origin = np.asarray(floorplan.origin, dtype=float)
         self.resolution = float(floorplan.resolution)
-        # Boolean "within tau_c of a wall" per cell, for the coarse nearest-cell test.
-        self.near_wall = np.ascontiguousarray(field < settings.tau_c).ravel()
+        # Boolean "within tau_c of a wall" per cell, for the coarse nearest-cell test. The
+        # outermost ring of cells is cleared so that points clamped onto the border from
+        # outside the grid count as far from any wall (no separate inside test needed).
+        # Points sit up to half a cell diagonal from their cell centre (where the field is
+        # sampled); the half-cell margin makes the test about unbiased against the
+        # bilinear lookup of the full score.
+        near = field < settings.tau_c + 0.5 * self.resolution
+        near[[0, -1], :] = False
+        near[:, [0, -1]] = False
+        self.near_wall = np.ascontiguousarray(near).ravel()
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
         # under a hypothesis' footprint are a few contiguous index ranges.
         walls = np.asarray(floorplan.sample_wall_points(), dtype=float).reshape(-1, 2)
@@ -104,13 +112,11 @@ class FloorplanScorer:
             b = (m[:, 3] * np.sin(m[:, 2]) * inv).astype(np.float32)[:, None]
             cu = ((m[:, 0] - self.origin[0]) * inv).astype(np.float32)[:, None]
             cv = ((m[:, 1] - self.origin[1]) * inv).astype(np.float32)[:, None]
-            u = a * px - b * py + cu
-            v = b * px + a * py + cv
-            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            col = np.clip(u, 0, w - 1).astype(np.int64)
-            row = np.clip(v, 0, h - 1).astype(np.int64)
-            hit = self.near_wall[row * w + col] & inside
-            out[sl] = hit.mean(axis=1)
+            col = np.clip(a * px - b * py + cu, 0, w - 1).astype(np.int32)
+            row = np.clip(b * px + a * py + cv, 0, h - 1).astype(np.int32)
+            row *= w
+            row += col
+            out[sl] = self.near_wall[row].mean(axis=1)
         return out
 
     def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
@@ -209,10 +215,13 @@ def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
 # --------------------------------------------------------------------------------------
 
 
-def sparse_line_points(lines: LineSet, spacing: float) -> np.ndarray:
-    """Points every `spacing` along each segment (at least its two ends)."""
+def sparse_line_points(lines: LineSet, spacing: float, max_points: int | None = None) -> np.ndarray:
+    """Points every `spacing` along each segment (at least its two ends); the spacing
+    grows when needed so that about max_points points are produced at most."""
     if len(lines) == 0:
         return np.zeros((0, 2))
+    if max_points:
+        spacing = max(spacing, float(lines.lengths.sum()) / max(max_points - 2 * len(lines), 1))
     e = lines.endpoints
     counts = np.maximum(np.ceil(lines.lengths / spacing).astype(np.int64), 1) + 1
     owner = np.repeat(np.arange(len(lines)), counts)
@@ -240,8 +249,12 @@ class BevView:
         # The paper measures to occupied cells only; but a wall seen at grazing incidence
         # gets hits far apart while free space reaches it between them, so occupied-only
         # clearance flags the true wall as a violation. Depth into free space does not.
-        depth = distance_transform_edt(free) * obs.resolution
-        deep = free & (np.minimum(np.asarray(obs.clearance), depth) > tau_v)
+        # "depth > tau_v" is an erosion of the free mask by a disc of radius tau_v.
+        r = int(np.floor(tau_v / obs.resolution))
+        yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+        disc = ((xx * xx + yy * yy) * obs.resolution**2 <= tau_v * tau_v).astype(np.uint8)
+        inner = cv2.erode(free.astype(np.uint8), disc, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+        deep = inner & (np.asarray(obs.clearance) > tau_v)
         state = (free.astype(np.int8) + deep).astype(np.int8)
         rows, cols = np.nonzero(free)
         if len(rows):

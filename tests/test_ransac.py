@@ -1,0 +1,177 @@
+"""Hybrid RANSAC localize(): recovers a known alignment on a synthetic BEV in every scale
+mode, with circles, from warm starts; deterministic; distinct ranked output; bad input."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from test_scoring import RES, building, observe  # synthetic floorplan + BEV helpers
+
+from zfloc_stream.config import EstimatorSettings, Settings
+from zfloc_stream.errors import InputError
+from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
+from zfloc_stream.estimation.ransac import BevSamples, floorplan_matches, solver_pool
+from zfloc_stream.estimation.scoring import implied_poses
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.geometry import CircleSet, LineSet
+from zfloc_stream.observation import BevObservation
+from zfloc_stream.primitives import extract_circles, extract_lines
+from zfloc_stream.rng import make_rng
+from zfloc_stream.sim2 import Sim2, wrap_angle
+
+CFG = Settings()
+CENTRE = np.array([8.5, 3.0])
+
+
+def with_primitives(obs: BevObservation, seed: int = 0) -> BevObservation:
+    rng = make_rng(seed, "test-primitives")
+    lines = extract_lines(obs.wall_points, CFG.primitives.lines, rng)
+    circles = extract_circles(obs.wall_points, CFG.primitives.circles, rng)
+    return dataclasses.replace(obs, lines=lines, circles=circles)
+
+
+def pillared_building() -> Floorplan:
+    fp = building()
+    occ = fp.occupied.copy()
+    rows, cols = np.mgrid[0 : occ.shape[0], 0 : occ.shape[1]]
+    x, y = (cols + 0.5) * RES, (rows + 0.5) * RES
+    for cx, cy in ((7.0, 2.2), (10.5, 3.9), (8.0, 4.6)):
+        occ |= (x - cx) ** 2 + (y - cy) ** 2 <= 0.3**2
+    return Floorplan.from_occupancy(occ, RES, (0.0, 0.0), Settings())
+
+
+def pose_error(alignment: Sim2, truth: Sim2, point=CENTRE) -> tuple[float, float]:
+    bev_point = truth.inverse().apply(point)
+    return float(np.linalg.norm(alignment.apply(bev_point) - point)), float(abs(np.rad2deg(wrap_angle(alignment.theta - truth.theta))))
+
+
+@pytest.fixture(scope="module")
+def plain():
+    fp = building()
+    truth = Sim2(1.15, 2.1, (-4.0, 7.0))
+    return fp, truth, with_primitives(observe(fp, truth, CENTRE, 6.0))
+
+
+@pytest.fixture(scope="module")
+def pillars():
+    fp = pillared_building()
+    truth = Sim2(0.9, -1.2, (5.0, 1.0))
+    return fp, truth, with_primitives(observe(fp, truth, CENTRE, 5.0))
+
+
+def test_localize_recovers_alignment(plain):
+    fp, truth, obs = plain
+    result = localize(fp, obs, CFG.estimator, make_rng(0, "t"))
+    assert isinstance(result, LocalizationResult) and isinstance(result.best, Hypothesis)
+    position, heading = pose_error(result.best.alignment, truth)
+    assert position < 0.1 and heading < 1.0
+    assert abs(result.best.alignment.s / truth.s - 1) < 0.02
+    assert result.best.score > 0.9 and result.best.cc >= result.best.score
+    assert result.n_models > 0
+    assert set(result.timings) == {"model_estimation", "scoring", "refinement"}
+    assert all(v >= 0 for v in result.timings.values())
+    scores = [h.score for h in result.hypotheses]
+    assert scores == sorted(scores, reverse=True)
+    assert len(result.hypotheses) <= CFG.estimator.ransac.max_hypotheses
+
+
+def test_hypotheses_are_distinct(plain):
+    fp, _, obs = plain
+    result = localize(fp, obs, CFG.estimator, make_rng(1, "t"))
+    models = np.array([[h.alignment.t[0], h.alignment.t[1], h.alignment.theta, h.alignment.s] for h in result.hypotheses])
+    pos, ang = implied_poses(models, obs.wall_points.mean(axis=0))
+    cfg = CFG.estimator.scoring
+    for i in range(len(models)):
+        for j in range(i):
+            same_place = np.linalg.norm(pos[i] - pos[j]) < cfg.distinct_translation
+            same_heading = abs(wrap_angle(ang[i] - ang[j])) < np.deg2rad(cfg.distinct_angle_deg)
+            assert not (same_place and same_heading)
+
+
+def test_same_seed_same_result(plain):
+    fp, _, obs = plain
+    a = localize(fp, obs, CFG.estimator, make_rng(5, "t"))
+    b = localize(fp, obs, CFG.estimator, make_rng(5, "t"))
+    assert [h.alignment for h in a.hypotheses] == [h.alignment for h in b.hypotheses]
+    assert [h.score for h in a.hypotheses] == [h.score for h in b.hypotheses]
+    assert a.n_models == b.n_models
+
+
+@pytest.mark.parametrize("mode", ["prior", "fixed"])
+def test_scale_modes(mode):
+    fp = building()
+    s = 1.0 if mode == "fixed" else 1.07
+    truth = Sim2(s, 0.4, (2.0, -1.0))
+    obs = with_primitives(observe(fp, truth, CENTRE, 6.0))
+    cfg = CFG.estimator.model_copy(update={"scale_mode": mode})
+    result = localize(fp, obs, cfg, make_rng(2, "t"), scale_prior=1.0)
+    position, heading = pose_error(result.best.alignment, truth)
+    assert position < 0.1 and heading < 1.0
+    if mode == "fixed":
+        assert all(h.alignment.s == 1.0 for h in result.hypotheses)
+
+
+def test_solver_pool_follows_mode_and_primitives(plain, pillars):
+    for fp, obs, has_circles in ((plain[0], plain[2], False), (pillars[0], pillars[2], True)):
+        fpm = floorplan_matches(fp, CFG.estimator.solvers)
+        bev = BevSamples(obs, CFG.primitives.lines, CFG.estimator.solvers, 6.0)
+        pools = {m: solver_pool(CFG.estimator.model_copy(update={"scale_mode": m}), bev, fpm) for m in ("free", "prior", "fixed")}
+        assert "2L" not in pools["free"] and "3L" in pools["free"]
+        assert {"3L", "2L"} <= set(pools["prior"])
+        assert "3L" not in pools["fixed"] and "2L" in pools["fixed"]
+        for pool in pools.values():
+            assert ("2C" in pool) == has_circles and ("LC" in pool) == has_circles
+
+
+def test_circles_alone_localize(pillars):
+    """With only the pillars (no lines), 2C localizes the BEV."""
+    fp, truth, obs = pillars
+    assert len(obs.circles) >= 2
+    circles_only = dataclasses.replace(obs, lines=LineSet.empty())
+    result = localize(fp, circles_only, CFG.estimator, make_rng(3, "t"))
+    assert result.best.solver in ("2C", "warm")
+    position, heading = pose_error(result.best.alignment, truth)
+    assert position < 0.15 and heading < 2.0
+
+
+def test_line_circle_pool(pillars):
+    fp, truth, obs = pillars
+    cfg = CFG.estimator.model_copy(update={"solvers": CFG.estimator.solvers.model_copy(update={"pool": ["LC"]})})
+    result = localize(fp, obs, cfg, make_rng(4, "t"))
+    assert {h.solver for h in result.hypotheses} == {"LC"}
+    position, heading = pose_error(result.best.alignment, truth)
+    assert position < 0.15 and heading < 2.0
+
+
+def test_warm_start_is_scored_and_refined(plain):
+    fp, truth, obs = plain
+    start = Sim2(truth.s * 1.02, truth.theta + 0.02, (truth.t[0] + 0.15, truth.t[1] - 0.1))
+    result = localize(fp, obs, CFG.estimator, make_rng(6, "t"), warm_start=[start], iterations=0)
+    assert result.n_models == 1 and len(result.hypotheses) == 1
+    best = result.best
+    assert best.solver == "warm"
+    assert pose_error(best.alignment, truth)[0] < pose_error(start, truth)[0]
+    assert pose_error(best.alignment, truth)[0] < 0.1
+
+
+def test_no_solver_applicable_gives_empty_result(plain):
+    fp, _, obs = plain
+    two_lines = dataclasses.replace(obs, lines=obs.lines.subset(np.arange(min(2, len(obs.lines)))))
+    result = localize(fp, two_lines, CFG.estimator, make_rng(0, "t"))  # free scale needs 3 lines
+    assert result.hypotheses == [] and result.n_models == 0
+
+
+def test_bad_input_raises_input_error(plain):
+    fp, _, obs = plain
+    no_primitives = dataclasses.replace(obs, lines=LineSet.empty(), circles=CircleSet.empty())
+    with pytest.raises(InputError, match="no lines and no circles"):
+        localize(fp, no_primitives, CFG.estimator, make_rng(0, "t"))
+    with pytest.raises(InputError, match="no wall points"):
+        BevObservation(np.zeros((0, 2)), np.zeros(2), 0.05, np.zeros((3, 3), bool), np.zeros((3, 3)))
+    with pytest.raises(InputError, match="BevObservation"):
+        localize(fp, obs.wall_points, CFG.estimator, make_rng(0, "t"))
+    with pytest.raises(InputError, match="scale_prior"):
+        localize(fp, obs, CFG.estimator, make_rng(0, "t"), scale_prior=0.0)
+    with pytest.raises(InputError, match="iterations"):
+        localize(fp, obs, CFG.estimator, make_rng(0, "t"), iterations=-1)

@@ -1,0 +1,201 @@
+"""Scoring: C = Cc - Cv ranks the true alignment above perturbed ones, Cv penalises
+floorplan walls placed in observed free space, coarse-to-fine ranking and distinctness."""
+
+import numpy as np
+import pytest
+from scipy.ndimage import distance_transform_edt
+
+from zfloc_stream.config import ScoringSettings, Settings
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.geometry import LineSet
+from zfloc_stream.observation import BevObservation
+from zfloc_stream.estimation.scoring import (
+    BevView,
+    distinct,
+    floorplan_scorer,
+    rank_coarse_to_fine,
+    score_hypotheses,
+    sparse_line_points,
+    transform_points,
+)
+from zfloc_stream.sim2 import Sim2
+
+RES = 0.05
+
+
+def building() -> Floorplan:
+    """12 x 8 m, 0.2 m outer walls; an interior wall at x = 5 with a door, and a short
+    wall stub in the right room (so the layout has no symmetry)."""
+    w, h = int(13 / RES), int(9 / RES)
+    occ = np.zeros((h, w), dtype=bool)
+
+    def box(x0, y0, x1, y1):
+        occ[int(round(y0 / RES)) : int(round(y1 / RES)), int(round(x0 / RES)) : int(round(x1 / RES))] = True
+
+    box(0.5, 0.5, 12.5, 0.7)
+    box(0.5, 8.3, 12.5, 8.5)
+    box(0.5, 0.5, 0.7, 8.5)
+    box(12.3, 0.5, 12.5, 8.5)
+    box(5.0, 0.5, 5.15, 3.0)  # interior wall with a door between y = 3 and 4
+    box(5.0, 4.0, 5.15, 8.5)
+    box(9.0, 5.5, 12.5, 5.65)  # stub
+    return Floorplan.from_occupancy(occ, RES, (0.0, 0.0), Settings())
+
+
+def observe(fp: Floorplan, truth: Sim2, centre, radius: float) -> BevObservation:
+    """A BEV of the floorplan around `centre` (floorplan frame) seen through `truth`:
+    floorplan wall faces within `radius` (no occlusion) mapped into the BEV frame, free
+    space = non-wall floorplan cells inside the building within the radius."""
+    inv = truth.inverse()
+    faces = fp.face_points[np.linalg.norm(fp.face_points - centre, axis=1) < radius]
+    walls = inv.apply(faces)
+    lo = walls.min(axis=0) - 1.0
+    n = np.ceil((walls.max(axis=0) + 1.0 - lo) / RES).astype(int)
+    rows, cols = np.mgrid[0 : n[1], 0 : n[0]]
+    centres = lo + (np.stack([cols, rows], axis=-1) + 0.5) * RES
+    mapped = truth.apply(centres.reshape(-1, 2))
+    inside = fp.contains(mapped)
+    r, c = fp.world_to_cell(mapped)
+    x0, y0, x1, y1 = 0.7, 0.7, 12.3, 8.3
+    in_building = (mapped[:, 0] > x0) & (mapped[:, 0] < x1) & (mapped[:, 1] > y0) & (mapped[:, 1] < y1)
+    wall = np.zeros(len(mapped), dtype=bool)
+    wall[inside] = fp.occupied[r[inside], c[inside]]
+    near = np.linalg.norm(mapped - centre, axis=1) < radius - 0.3
+    free = (~wall & in_building & near).reshape(n[1], n[0])
+    occupied = np.zeros_like(free)
+    wr = np.floor((walls - lo) / RES).astype(int)
+    occupied[wr[:, 1], wr[:, 0]] = True
+    clearance = np.where(free, distance_transform_edt(~occupied) * RES, 0.0)
+    return BevObservation(walls, lo, RES, free & ~occupied, clearance)
+
+
+@pytest.fixture(scope="module")
+def world():
+    fp = building()
+    truth = Sim2(1.1, 0.7, (3.0, -2.0))
+    obs = observe(fp, truth, centre=np.array([8.5, 3.0]), radius=5.0)
+    return fp, truth, obs
+
+
+def params(T: Sim2) -> np.ndarray:
+    return np.array([T.t[0], T.t[1], T.theta, T.s])
+
+
+def perturbed(T: Sim2, dx=0.0, dtheta=0.0, ds=1.0) -> Sim2:
+    return Sim2(T.s * ds, T.theta + dtheta, (T.t[0] + dx, T.t[1]))
+
+
+def test_transform_points_matches_sim2(world):
+    _, truth, obs = world
+    models = np.array([params(truth), params(Sim2(0.7, -2.0, (1, 2)))])
+    out = transform_points(models, obs.wall_points[:50])
+    assert np.allclose(out[0], truth.apply(obs.wall_points[:50]))
+    assert np.allclose(out[1], Sim2(0.7, -2.0, (1, 2)).apply(obs.wall_points[:50]))
+
+
+def test_true_transform_scores_highest(world):
+    fp, truth, obs = world
+    candidates = [truth] + [
+        perturbed(truth, dx=0.3),
+        perturbed(truth, dx=-0.5),
+        perturbed(truth, dtheta=np.deg2rad(3)),
+        perturbed(truth, dtheta=np.deg2rad(-8)),
+        perturbed(truth, ds=1.05),
+        perturbed(truth, ds=0.9),
+    ]
+    scores = score_hypotheses(fp, obs, np.array([params(T) for T in candidates]))
+    assert scores.consistency[0] > 0.95 and scores.violation[0] < 0.02
+    assert (scores.total[0] > scores.total[1:] + 0.05).all()
+    assert np.allclose(scores.total, scores.consistency - scores.violation)
+
+
+def test_violation_penalises_walls_in_free_space(world):
+    fp, truth, obs = world
+    # Shift the BEV 2 m along x: its free room now covers the interior wall at x = 5
+    # while most BEV wall points still land near some floorplan wall (outer walls).
+    shifted = perturbed(truth, dx=-3.9)
+    s = score_hypotheses(fp, obs, np.array([params(truth), params(shifted)]))
+    assert s.violation[0] < 0.02
+    assert s.violation[1] > 0.2
+    assert s.total[1] < s.consistency[1] - 0.2
+    # With no observed free space there is nothing to violate: Cv = 0
+    empty_free = BevObservation(obs.wall_points, obs.origin, obs.resolution, np.zeros_like(obs.free), np.zeros_like(obs.clearance))
+    assert score_hypotheses(fp, empty_free, np.array([params(shifted)])).violation[0] == 0.0
+
+
+def test_violation_ignores_shallow_free_space(world):
+    """Floorplan walls inside free space but within tau_v of its border are not violations."""
+    fp, truth, obs = world
+    view = BevView.of(obs, ScoringSettings().tau_v)
+    deep = view.state == 2
+    assert deep.any() and (view.state[deep] > 0).all()
+    rows, cols = np.nonzero(deep)
+    # every deep cell is farther than tau_v from any non-free cell
+    depth = distance_transform_edt(np.pad(obs.free, 1))[1:-1, 1:-1] * obs.resolution
+    assert (depth[rows, cols] > ScoringSettings().tau_v).all()
+
+
+def test_coarse_consistency_agrees_with_full(world):
+    fp, truth, obs = world
+    rng = np.random.default_rng(0)
+    models = np.array([params(truth)] + [params(perturbed(truth, dx=rng.normal(0, 0.3), dtheta=rng.normal(0, 0.05))) for _ in range(30)])
+    cfg = ScoringSettings()
+    scorer = floorplan_scorer(fp, cfg)
+    coarse = scorer.coarse_consistency(models, obs.wall_points, cfg.chunk_size)
+    full = scorer.consistency(models, obs.wall_points, cfg.tau_c, cfg.chunk_size)
+    # nearest-cell vs bilinear lookup: same fractions up to the cell quantisation
+    assert np.abs(coarse - full).max() < 0.15
+    assert np.corrcoef(coarse, full)[0, 1] > 0.9
+    # chunking does not change results
+    small = cfg.model_copy(update={"chunk_size": 100})
+    assert np.array_equal(scorer.coarse_consistency(models, obs.wall_points, small.chunk_size), coarse)
+
+
+def test_coarse_to_fine_puts_truth_first(world):
+    fp, truth, obs = world
+    rng = np.random.default_rng(1)
+    wrong = [Sim2(rng.uniform(0.6, 1.6), rng.uniform(-np.pi, np.pi), rng.uniform(-10, 10, 2)) for _ in range(2000)]
+    near = [perturbed(truth, dx=0.05 * k) for k in range(1, 4)]  # near-duplicates of the truth
+    models = np.array([params(T) for T in wrong + near + [truth]])
+    lines = LineSet.from_endpoints(truth.inverse().apply(np.array([[0.7, 0.7], [12.3, 0.7], [12.3, 0.7], [12.3, 8.3]])).reshape(2, 2, 2))
+    sparse = sparse_line_points(lines, 0.25)
+    anchor = obs.wall_points.mean(axis=0)
+    ranking = rank_coarse_to_fine(fp, obs, models, sparse, anchor, ScoringSettings(top_k=20))
+    assert len(ranking.index) <= 20
+    best = models[ranking.index[0]]
+    assert np.abs(best[:2] - params(truth)[:2]).max() < 0.2
+    assert np.all(np.diff(ranking.scores.total) <= 0)  # best first
+    # the near-duplicates of the truth were merged into one entry
+    kept = models[ranking.index]
+    pos = transform_points(kept, anchor[None])[:, 0]
+    close = np.linalg.norm(pos - truth.apply(anchor), axis=1) < ScoringSettings().distinct_translation
+    assert close.sum() == 1
+
+
+def test_distinct_suppresses_near_duplicates():
+    cfg = ScoringSettings()
+    anchor = np.array([1.0, 2.0])
+    base = np.array([0.0, 0.0, 0.3, 1.0])
+    models = np.array(
+        [
+            base,
+            base + [0.1, 0.0, 0.0, 0.0],  # same pose
+            base + [0.0, 0.0, np.deg2rad(3), 0.0],  # same pose (small turn about origin moves anchor < 0.5 m)
+            base + [2.0, 0.0, 0.0, 0.0],  # different position
+            base + [0.0, 0.0, np.pi, 0.0],  # same position of the anchor? no: rotated by pi
+            base + [0.05, 0.0, np.deg2rad(30), 0.0],  # different heading
+        ]
+    )
+    kept = distinct(models, anchor, cfg)
+    assert kept.tolist() == [0, 3, 4, 5]
+    assert distinct(models, anchor, cfg, limit=2).tolist() == [0, 3]
+    assert distinct(np.zeros((0, 4)), anchor, cfg).size == 0
+
+
+def test_sparse_line_points_spacing():
+    lines = LineSet.from_endpoints([[[0, 0], [10, 0]], [[0, 0], [0, 0.1]]])
+    pts = sparse_line_points(lines, 0.25)
+    assert len(pts) == 41 + 2
+    assert np.allclose(pts[0], [0, 0]) and np.allclose(pts[40], [10, 0])
+    capped = sparse_line_points(lines, 0.25, max_points=20)
+    assert len(capped) <= 22
