@@ -316,3 +316,13 @@ def test_laser_range_noise_statistics():
     diff = np.concatenate([fb.ranges[fa.valid] - fa.ranges[fa.valid] for fa, fb in zip(a, b)])
     assert diff.std() == pytest.approx(0.02, rel=0.15) and abs(diff.mean()) < 0.003
     assert np.array_equal(a.poses, b.poses)
+
+
+def test_given_trajectory_is_used_whole_unless_cut():
+    scene = build_scene("rooms", 0)
+    walk = random_walk(scene, make_rng(3, "w"), 130)
+    seq = simulate(scene, SimSettings(), seed=0, trajectory=walk)
+    assert len(seq) == 130 and np.array_equal(seq.poses, walk)
+    assert len(simulate(scene, SimSettings(), seed=0, trajectory=walk, n_frames=10)) == 10
+    assert len(simulate(scene, SimSettings(), seed=0)) == 100
+    assert len(simulate_laser(scene, seed=0, trajectory=walk[:20])) == 20

@@ -189,7 +189,7 @@ _WALL_ITEMS = (
 _FREE_ITEMS = (("table", 1.6, 0.9, 0.75), ("table_small", 1.2, 0.7, 0.75), ("crate", 0.8, 0.8, 1.0))
 
 
-def _door_keepouts(doors, depth: float = 1.5, side: float = 0.3) -> np.ndarray:
+def _door_keepouts(doors, depth: float = 1.3, side: float = 0.3) -> np.ndarray:
     """Axis-aligned (xmin, ymin, xmax, ymax) rectangles in front of every door."""
     out = []
     for d in doors:
@@ -223,7 +223,7 @@ def _furnish(rooms: list[Room], doors, pillars: np.ndarray, rng,
         x0, y0, x1, y1 = room.x0 + inset, room.y0 + inset, room.x1 - inset, room.y1 - inset
         small = min(x1 - x0, y1 - y0)
         if room.kind in wall_kinds:
-            max_depth = min(0.3 * small, 1.4)  # a bed fits in bigger rooms
+            max_depth = min(0.3 * small, 1.0)
             n_items = int(rng.integers(1, 2 + min(3, int(room.area // 8))))
             for _ in range(n_items):
                 for _try in range(20):

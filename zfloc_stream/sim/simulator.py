@@ -236,14 +236,19 @@ class SimSequence:
                            ground_truth=self.poses[k].copy())
 
 
-def simulate(scene: Scene | str, settings: SimSettings | None = None, seed: int = 0, n_frames: int | None = 100,
+DEFAULT_FRAMES = 100
+
+
+def simulate(scene: Scene | str, settings: SimSettings | None = None, seed: int = 0, n_frames: int | None = None,
              trajectory=None) -> SimSequence:
-    """A camera sequence of n_frames along a seeded random walk (or along `trajectory`,
-    (N, 3) true x, y, theta, e.g. from trajectory_through). `scene` may be a built-in name
-    (built with the same seed)."""
+    """A camera sequence of n_frames (default 100) along a seeded random walk, or along
+    `trajectory` ((N, 3) true x, y, theta, e.g. from trajectory_through; all of it unless
+    n_frames is given). `scene` may be a built-in name (built with the same seed)."""
     settings = settings or SimSettings()
     scene = _scene(scene, seed)
-    if trajectory is None and (n_frames is None or n_frames < 1):
+    if trajectory is None:
+        n_frames = DEFAULT_FRAMES if n_frames is None else n_frames
+    if n_frames is not None and n_frames < 1:
         raise InputError(f"n_frames must be >= 1, got {n_frames}")
     ws = _walk_settings(settings)
     poses = _trajectory(scene, trajectory, make_rng(seed, "sim", scene.name, "walk"), n_frames, ws)
@@ -316,11 +321,14 @@ def _laser_ranges(scene: Scene, pose, s: LaserSimSettings, rng) -> tuple[np.ndar
 
 
 def simulate_laser(scene: Scene | str, settings: LaserSimSettings | None = None, seed: int = 0,
-                   n_frames: int | None = 100, trajectory=None) -> LaserSequence:
-    """A 2D laser sequence along a seeded random walk (or `trajectory`)."""
+                   n_frames: int | None = None, trajectory=None) -> LaserSequence:
+    """A 2D laser sequence of n_frames (default 100) along a seeded random walk, or along
+    `trajectory` (all of it unless n_frames is given)."""
     settings = settings or LaserSimSettings()
     scene = _scene(scene, seed)
-    if trajectory is None and (n_frames is None or n_frames < 1):
+    if trajectory is None:
+        n_frames = DEFAULT_FRAMES if n_frames is None else n_frames
+    if n_frames is not None and n_frames < 1:
         raise InputError(f"n_frames must be >= 1, got {n_frames}")
     ws = _walk_settings(settings)
     poses = _trajectory(scene, trajectory, make_rng(seed, "sim", scene.name, "walk"), n_frames, ws)
