@@ -110,7 +110,9 @@ def test_settings_and_floorplan_travel_inside(tmp_path):
     assert sorted(session.floorplan_files) == ["floorplan.png", "floorplan.yaml"]
     back = session.floorplan
     assert np.array_equal(back.occupied, plan.occupied) and back.resolution == plan.resolution
-    assert np.array_equal(back.origin, plan.origin) and back.settings == settings
+    # the floorplan was built with the defaults, not the run's settings: rebuilt the same way
+    assert np.array_equal(back.origin, plan.origin) and back.settings == plan.settings == session.floorplan_settings
+    assert session.load_floorplan(settings).settings == settings
 
 
 def test_intel_camera_session_from_another_tool():

@@ -32,7 +32,7 @@ from ..errors import SessionLogError
 from ..estimate import Estimate
 from ..frames import CameraFrame, LaserFrame
 from . import schemas as S
-from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
+from .assemble import laser_frame_from_msgs
 
 _OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -187,7 +187,12 @@ class SessionWriter:
         self._write(S.TOPIC_ODOMETRY, odom, ns, index, axis)
         if gt is not None:
             self._write(S.TOPIC_GROUND_TRUTH, gt, ns, index, axis)
-        return camera_frame_from_msgs(depth, labels, calib, odom, gt, "z", S.ns_to_seconds(ns))
+        # Images and K are stored exactly (32FC1 / mono8 bytes, K as doubles): only the pose,
+        # the time and the ground truth change in the round trip, so the arrays are reused
+        # instead of decoded again (a 640x480 frame saves a copy and a validation pass).
+        T = S.matrix_from_pose(odom.pose)
+        truth = None if gt is None else S.planar_pose_from_pose(gt.pose, "z")
+        return CameraFrame(frame.depth, frame.labels, frame.K, T, S.ns_to_seconds(ns), ground_truth=truth)
 
     def _write_laser(self, index: int, frame: LaserFrame, ns: int) -> LaserFrame:
         scan = S.scan_to_msg(frame.ranges, frame.angle_min, frame.angle_increment, ns)
