@@ -53,6 +53,7 @@ EXPECTED_SCHEMAS = {
 # Topics whose progress decides that a timestamp is complete (calibration is a state:
 # often published once, so it must not hold frames back).
 _PROGRESS_TOPICS = (S.TOPIC_DEPTH, S.TOPIC_SCAN, S.TOPIC_LABELS, S.TOPIC_ODOMETRY, S.TOPIC_GROUND_TRUTH, S.TOPIC_STATUS)
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 # A topic that stops early would otherwise hold every later frame in memory.
 _MAX_PENDING_STAMPS = 16
 
@@ -117,7 +118,7 @@ class Session:
         if crc is not None and crc != S.crc32_hex(text.encode("utf-8", "surrogateescape")):
             raise SessionLogError(f"{self.path}: {what} are damaged (checksum mismatch)")
         try:
-            data = yaml.safe_load(text)
+            data = yaml.load(text, Loader=_YAML_LOADER)
         except yaml.YAMLError:
             raise SessionLogError(f"{self.path}: {what} are not valid YAML") from None
         if not isinstance(data, dict):
