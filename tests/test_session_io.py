@@ -206,3 +206,15 @@ def test_writer_refuses_non_increasing_time_and_bad_paths(tmp_path):
     with pytest.raises(SessionLogError, match="cannot create"):
         SessionWriter(tmp_path / "no" / "dir" / "s.mcap", Settings())
     assert len(list(read_session(tmp_path / "s.mcap").frames())) == 1  # closed cleanly after the errors
+
+
+def test_unknown_truth_is_not_logged_and_bad_truth_is_refused(tmp_path):
+    import dataclasses
+
+    a, b = camera_frames(2)
+    with SessionWriter(tmp_path / "s.mcap", Settings()) as log:
+        assert log.write_frame(0, dataclasses.replace(a, ground_truth=np.full(3, np.nan))).ground_truth is None
+        with pytest.raises(SessionLogError, match=r"frame 1: ground_truth must be \(x, y, theta\)"):
+            log.write_frame(1, dataclasses.replace(b, ground_truth=np.zeros(2)))
+    frames = list(read_session(tmp_path / "s.mcap").frames())
+    assert len(frames) == 1 and frames[0].ground_truth is None

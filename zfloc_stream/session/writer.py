@@ -68,6 +68,18 @@ def bev_grid_of(source) -> S.BevGrid | None:
     return S.BevGrid(values[r0:r1, c0:c1], origin, float(resolution))
 
 
+def _truth_msg(index: int, truth, ns: int, heading_axis: str):
+    """/groundtruth/pose of a frame; None where the truth is unknown (None or NaN)."""
+    if truth is None:
+        return None
+    t = np.asarray(truth, dtype=float).ravel()
+    if t.size != 3:
+        raise SessionLogError(f"frame {index}: ground_truth must be (x, y, theta), got {t.size} values")
+    if not np.isfinite(t).all():
+        return None
+    return S.PoseInFrame(timestamp=S.to_stamp(ns), frame_id=S.FRAME_FLOORPLAN, pose=S.planar_pose_to_pose(t, heading_axis))
+
+
 class SessionWriter:
     """Writes one session file. Use as a context manager (or call close())."""
 
@@ -176,9 +188,7 @@ class SessionWriter:
         depth = S.depth_to_msg(frame.depth, ns)
         labels = None if frame.labels is None else S.labels_to_msg(frame.labels, ns)
         odom = S.pose_to_msg(frame.T_odom_cam, ns, S.FRAME_ODOM)
-        gt = None
-        if frame.ground_truth is not None:
-            gt = S.PoseInFrame(timestamp=S.to_stamp(ns), frame_id=S.FRAME_FLOORPLAN, pose=S.planar_pose_to_pose(frame.ground_truth, "z"))
+        gt = _truth_msg(index, frame.ground_truth, ns, "z")
         axis = {S.HEADING_AXIS_KEY: "z"}
         self._write(S.TOPIC_CALIBRATION, calib, ns, index)
         self._write(S.TOPIC_DEPTH, depth, ns, index)
@@ -197,9 +207,7 @@ class SessionWriter:
     def _write_laser(self, index: int, frame: LaserFrame, ns: int) -> LaserFrame:
         scan = S.scan_to_msg(frame.ranges, frame.angle_min, frame.angle_increment, ns)
         odom = S.pose_to_msg(frame.T_odom_sensor, ns, S.FRAME_ODOM)
-        gt = None
-        if frame.ground_truth is not None:
-            gt = S.PoseInFrame(timestamp=S.to_stamp(ns), frame_id=S.FRAME_FLOORPLAN, pose=S.planar_pose_to_pose(frame.ground_truth, "x"))
+        gt = _truth_msg(index, frame.ground_truth, ns, "x")
         limits = {S.RANGE_MIN_KEY: repr(float(frame.range_min)), S.RANGE_MAX_KEY: repr(float(frame.range_max))}
         axis = {S.HEADING_AXIS_KEY: "x"}
         self._write(S.TOPIC_SCAN, scan, ns, index, limits)
