@@ -126,7 +126,7 @@ def test_cli_runs_a_tiny_study(tmp_path, capsys):
 def test_an_existing_scheduler_runs_the_cells(tmp_path):
     from dask.distributed import LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0") as cluster:
         remote = run_study([GIBSON], [20], [0], tmp_path / "remote", scheduler=cluster.scheduler_address, progress=False)
     local = run_study([GIBSON], [20], [0], tmp_path / "local", workers=0, progress=False)
     assert remote.ran == 2 and _metrics(remote.rows) == _metrics(local.rows)

@@ -209,7 +209,7 @@ def _make_client(scheduler: str | None, workers: int | None, processes: bool, se
             raise InputError(f"cannot connect to dask scheduler {scheduler}: {err}") from None
     n = workers or os.cpu_count() or 1
     cluster = LocalCluster(
-        n_workers=n, threads_per_worker=1, processes=processes, dashboard_address=None, silence_logs=logging.ERROR
+        n_workers=n, threads_per_worker=1, processes=processes, dashboard_address=":0", silence_logs=logging.ERROR
     )
     return Client(cluster), cluster
 
