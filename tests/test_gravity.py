@@ -140,3 +140,34 @@ def test_gravity_estimator_is_deterministic():
 
     (Ra, ha), (Rb, hb) = run(), run()
     assert np.array_equal(Ra, Rb) and ha == hb
+
+
+# --- on the simulator's scenes (tilted odometry frame, pitch/roll up to 20 deg) ------------
+def sim_gravity_errors(scene, seeds, n_frames, labels):
+    from zfloc_stream.sim.simulator import SimSettings, simulate
+
+    errors = []
+    for seed in seeds:
+        s = SimSettings(max_pitch_deg=20, max_roll_deg=20, odom_gravity_aligned=False, use_labels=labels)
+        seq = simulate(scene, s, seed=seed, n_frames=n_frames)
+        bev = RollingBEV(load_settings(overrides={"seed": seed}))
+        for f in seq:
+            bev.add(f)
+        errors.append(angle_deg(bev.gravity.up_odom, seq.odom_tilt[:3, :3] @ [0, 0, 1]))
+    return np.array(errors)
+
+
+@pytest.mark.parametrize("labels", [True, False])
+def test_gravity_on_simulated_sequences(labels):
+    pytest.importorskip("zfloc_stream.sim.simulator")
+    err = sim_gravity_errors("rooms", range(2), 8, labels)
+    assert np.median(err) < 1.0
+
+
+@pytest.mark.slow
+def test_gravity_on_simulated_sequences_all_scenes():
+    pytest.importorskip("zfloc_stream.sim.simulator")
+    for scene in ("rooms", "apartment", "office", "hall"):
+        for labels in (True, False):
+            err = sim_gravity_errors(scene, range(5), 12, labels)
+            assert np.median(err) < 1.0, (scene, labels)

@@ -142,3 +142,41 @@ def test_geometric_labeller_matches_rendered_labels():
     # geometric "wall" on true building walls, not on the table (labelled OTHER)
     called_wall = labels == WALL
     assert (truth[called_wall] != OTHER).mean() > 0.9
+
+
+# --- on the simulator's scenes: every furniture piece labelled wall --------------------------
+def sim_ghosts(scene, seed, n_frames):
+    """(ghost, true) BEV wall cells with the mask on and off; ghosts lie > 0.2 m from every
+    floorplan wall. No odometry drift or scale error, so one alignment maps the BEV."""
+    from zfloc_stream.sim.simulator import SimSettings, simulate
+
+    s = SimSettings(
+        max_pitch_deg=20, max_roll_deg=20, furniture_as_wall_prob=1.0,
+        odom_translation_noise=0, odom_yaw_noise_deg=0, scale_error=0,
+    )
+    seq = simulate(scene, s, seed=seed, n_frames=n_frames)
+    frames = seq.frames
+    out = {}
+    for on in (True, False):
+        bev = fuse(frames, on)
+        obs = bev.observation(make_rng(0, "obs"))
+        # plane -> odometry plane (gravity-aligned odometry here) -> floorplan
+        lifted = np.c_[obs.wall_points, np.full(len(obs.wall_points), bev.gravity.floor_height + 1.0)]
+        d = seq.scene.floorplan.distance(seq.alignment.apply((lifted @ bev.gravity.R_plane_odom)[:, :2]))
+        out[on] = np.array([(d > 0.2).sum(), (d <= 0.2).sum()])
+    return out[True], out[False]
+
+
+def test_wall_mask_on_a_simulated_scene():
+    pytest.importorskip("zfloc_stream.sim.simulator")
+    on, off = sim_ghosts("rooms", 0, 30)
+    assert off[0] > 50
+    assert on[0] <= 0.2 * off[0] and on[1] >= 0.6 * off[1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", ["rooms", "office", "hall"])
+def test_wall_mask_on_simulated_scenes(scene):
+    pytest.importorskip("zfloc_stream.sim.simulator")
+    on, off = np.sum([sim_ghosts(scene, seed, 40) for seed in range(3)], axis=0)
+    assert on[0] <= 0.2 * off[0] and on[1] >= 0.6 * off[1]

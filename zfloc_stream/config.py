@@ -144,7 +144,8 @@ class WallMaskSettings(Section):
 
     enabled: bool = True
     tau_d: float = 0.3  # m (paper's tau_d): a non-wall pixel deeper than median + tau_d drops the column
-    segment_gap: float = 0.3  # m, depth gap that splits a column's wall pixels into segments
+    segment_gap: float = 0.1  # m, depth gap that splits a column's wall pixels into segments...
+    segment_gap_per_m: float = 0.01  # ...plus this much per metre of depth (noise grows with depth)
     min_forward_depth: float = 0.05  # m, points closer than this to the upright image plane are not warped
 
 

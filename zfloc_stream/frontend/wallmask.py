@@ -102,9 +102,12 @@ def refine_wall_points(
     median = 0.5 * (w_d[starts + (counts - 1) // 2] + w_d[starts + counts // 2])  # eq. 3
 
     keep_column = deepest_other[col_ids] <= median + settings.tau_d  # eq. 4
-    # depth-separated segments: a new segment starts at each column start or depth gap
+    # depth-separated segments: a new segment starts at each column start or depth gap. The
+    # gap is small (a wall is one depth per column) but grows with depth like the noise;
+    # a large gap would let a wall-labelled furniture top bridge its front face to the wall
+    gap = settings.segment_gap + settings.segment_gap_per_m * w_d[1:]
     new_segment = np.ones(len(w_d), dtype=bool)
-    new_segment[1:] = (w_col[1:] != w_col[:-1]) | (np.diff(w_d) > settings.segment_gap)
+    new_segment[1:] = (w_col[1:] != w_col[:-1]) | (np.diff(w_d) > gap)
     segment = np.cumsum(new_segment)
     # sorted by depth, the farthest segment (largest median, eq. 5) is the column's last
     last_segment = segment[starts + counts - 1]
