@@ -1,7 +1,7 @@
 """Study throughput: chunks per second of `run_study` with 1 and 2 local worker processes
 (and in-process, no dask), on the same cells. Wall time includes starting the cluster.
 
-    .venv/bin/python benchmarks/study_throughput.py [--dataset sim:rooms,apartment] [--length 20]
+    .venv/bin/python benchmarks/bench_study.py [--dataset sim:rooms,apartment] [--length 20]
         [--chunks 4] [--seeds 2] [--workers 0,1,2]
 """
 
