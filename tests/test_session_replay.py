@@ -52,6 +52,9 @@ def _rewrite(src: Path, dst: Path, edit_status) -> None:
 
 
 def test_replay_check_is_identical(recorded, capsys):
+    # the run logged its BEV (every logging.bev_every_n_frames frames): the check covers it
+    grids = [r.outputs.bev_grid for r in read_session(recorded).records() if r.outputs.bev is not None]
+    assert len(grids) == N // 10 and all(g.values.size > 100 and g.resolution > 0 for g in grids)
     assert main([str(recorded), "--check", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert f"identical: {N} frames checked (0-{N - 1})" in out
