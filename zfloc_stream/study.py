@@ -437,9 +437,20 @@ def write_outputs(outcome: StudyOutcome, datasets, lengths, seeds, settings: Set
         "run": {"cells_run": outcome.ran, "cells_skipped": outcome.skipped, "seconds": outcome.seconds,
                 "chunks_per_second": outcome.chunks_per_second},
     }
-    (out / "results.json").write_text(json.dumps(report, indent=2, allow_nan=True))
+    (out / "results.json").write_text(json.dumps(_finite_or_null(report), indent=2, allow_nan=False))
     (out / "results.md").write_text(markdown_table(outcome.summary, lengths, thresholds))
     plot_sr_vs_length(outcome.summary, thresholds, out / "sr_vs_length.png")
+
+
+def _finite_or_null(value):
+    """NaN / inf -> None, so results.json is strict JSON."""
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_or_null(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
 
 def parse_lengths(text: str) -> list[int]:
