@@ -45,6 +45,7 @@ TOPIC_POSE = "/zfloc/pose"
 TOPIC_HYPOTHESES = "/zfloc/hypotheses"
 TOPIC_BEV = "/zfloc/bev"
 TOPIC_STATUS = "/zfloc/status"
+TOPIC_FLOORPLAN = "/zfloc/floorplan"  # Grid, once, for display (the attachment is the source of truth)
 INPUT_TOPICS = (TOPIC_CALIBRATION, TOPIC_DEPTH, TOPIC_LABELS, TOPIC_SCAN, TOPIC_ODOMETRY, TOPIC_GROUND_TRUTH)
 OUTPUT_TOPICS = (TOPIC_POSE, TOPIC_HYPOTHESES, TOPIC_BEV, TOPIC_STATUS)
 
@@ -299,6 +300,19 @@ def grid_to_msg(grid: BevGrid, ns: int, frame_id: str = FRAME_ODOM) -> Grid:
     msg.pose.orientation.w = 1.0
     msg.cell_size.x = msg.cell_size.y = float(grid.resolution)
     msg.fields.append(PackedElementField(name=grid.name, offset=0, type=PackedElementField.FLOAT32))
+    return msg
+
+
+def occupancy_grid_msg(occupied: np.ndarray, origin, resolution: float, ns: int, frame_id: str = FRAME_FLOORPLAN) -> Grid:
+    """A bool occupancy raster (row 0 = smallest y) as a UINT8 Grid, 100 = wall: the
+    floorplan drawn in Foxglove under the poses (display only; replay uses the attachment)."""
+    v = np.ascontiguousarray(np.where(occupied, 100, 0), dtype=np.uint8)
+    h, w = v.shape
+    msg = Grid(timestamp=to_stamp(ns), frame_id=frame_id, column_count=w, row_stride=w, cell_stride=1, data=v.tobytes())
+    msg.pose.position.x, msg.pose.position.y = (float(c) for c in origin)
+    msg.pose.orientation.w = 1.0
+    msg.cell_size.x = msg.cell_size.y = float(resolution)
+    msg.fields.append(PackedElementField(name="occupied", offset=0, type=PackedElementField.UINT8))
     return msg
 
 

@@ -105,6 +105,7 @@ class SessionWriter:
         info = {"format": S.SESSION_FORMAT, "writer": f"zfloc-stream/{__version__}"}
         info.update({str(k): str(v) for k, v in (metadata or {}).items()})
         self._mcap.add_metadata(S.METADATA_SESSION, info)
+        self._floorplan_to_draw = floorplan  # published as a Grid with the first frame
         if floorplan is not None:
             self._attach_floorplan(floorplan)
             # A floorplan built with other settings (seed, primitive parameters) has other
@@ -174,6 +175,10 @@ class SessionWriter:
         if self._frames_in_chunk >= self._cfg.chunk_max_frames:
             self._mcap.flush()  # close the chunk: bounds what a crash can lose
             self._frames_in_chunk = 0
+        if self._floorplan_to_draw is not None:
+            plan, self._floorplan_to_draw = self._floorplan_to_draw, None
+            if all(hasattr(plan, a) for a in ("occupied", "origin", "resolution")):
+                self._write(S.TOPIC_FLOORPLAN, S.occupancy_grid_msg(plan.occupied, plan.origin, plan.resolution, ns), ns, index)
         return ns
 
     def _end_frame(self, timestamp: float, ns: int) -> None:
