@@ -20,7 +20,7 @@ from . import carmen, gibson, mcap, sim  # noqa: F401 (registers the loaders)
 from .base import Sequence, known_kinds, open_dataset, register, synthetic_odometry
 
 MCAP_MAGIC = b"\x89MCAP"
-HEAD_BYTES = 4096
+HEAD_BYTES = 65536  # enough to get past a long comment header
 
 __all__ = ["Sequence", "detect_source", "known_kinds", "open_dataset", "register", "synthetic_odometry"]
 

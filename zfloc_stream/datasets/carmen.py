@@ -75,7 +75,7 @@ def open_text(path: Path):
 
 def looks_like_carmen(head: bytes) -> bool:
     """True when the first bytes of a (decompressed) file hold Carmen message lines."""
-    lines = head.splitlines()[:200]
+    lines = head.splitlines()
     return any(line.split(b" ", 1)[0] in CARMEN_WORDS for line in lines)
 
 
