@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from zfloc_stream.frames import CEILING, FLOOR, OTHER, WALL, CameraFrame
+from zfloc_stream.frames import CEILING, FLOOR, OTHER, WALL, CameraFrame  # noqa: F401 (re-exported for tests)
 
 
 @dataclass(frozen=True)

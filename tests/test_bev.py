@@ -120,3 +120,25 @@ def test_same_input_same_observation():
     assert np.array_equal(a.wall_points, b.wall_points)
     assert np.array_equal(a.free, b.free)
     assert np.array_equal(a.lines.offsets, b.lines.offsets)
+
+
+def test_camera_fusion_puts_walls_on_walls_and_memory_stays_flat():
+    from frontend_scene import CameraFrame, camera_sequence, distance_to_true_walls, plane_to_world
+
+    frames, T_odom_world = camera_sequence(make_rng(0, "bev-camera"), 12, noise=0.0015)
+    bev = RollingBEV(Settings())
+    for f in frames:
+        bev.add(f)
+    obs = bev.observation(make_rng(0, "obs"))
+    d = distance_to_true_walls(plane_to_world(bev, T_odom_world)(obs.wall_points))
+    assert len(d) > 300 and np.median(d) < 0.05 and (d < 0.2).mean() > 0.95
+    # the camera path keeps a fixed footprint while the odometry carries it 60 m away
+    sizes = []
+    for i in range(40):
+        f = frames[i % len(frames)]
+        T = f.T_odom_cam.copy()
+        T[:3, 3] += 1.5 * i * T_odom_world[:3, 0]  # along world x
+        bev.add(CameraFrame(f.depth, f.labels, f.K, T, f.timestamp))
+        sizes.append(bev.memory_bytes())
+    assert len(set(sizes)) == 1
+    assert bev.observation(make_rng(0)).free.size <= bev.grid.n**2

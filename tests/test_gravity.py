@@ -171,3 +171,15 @@ def test_gravity_on_simulated_sequences_all_scenes():
         for labels in (True, False):
             err = sim_gravity_errors(scene, range(5), 12, labels)
             assert np.median(err) < 1.0, (scene, labels)
+
+
+def test_asking_for_poses_before_gravity_does_not_change_it():
+    rng = make_rng(6, "provisional")
+    frames, _ = camera_sequence(rng, 4)
+    settings = load_settings(overrides=["frontend.gravity.min_frames=3"])
+    quiet, asking = RollingBEV(settings), RollingBEV(settings)
+    for f in frames:
+        quiet.add(f)
+        asking.add(f)
+        asking.plane_pose(f)  # provisional fits while gravity is unknown
+    assert np.array_equal(quiet.gravity.R_plane_odom, asking.gravity.R_plane_odom)

@@ -83,6 +83,10 @@ class GravityEstimator:
         self._R: np.ndarray | None = np.eye(3) if settings.trust_odometry else None
         self.floor_height: float | None = None
         self.inlier_ratio: float | None = None
+        # provisional fits draw from their own stream, so asking for a pose never changes
+        # the frozen gravity; cached per number of frames seen
+        self._provisional_seed = int(rng.integers(2**63))
+        self._provisional: tuple[int, np.ndarray] | None = None
 
     # ------------------------------------------------------------------------------
     @property
@@ -104,12 +108,16 @@ class GravityEstimator:
         """Best current guess: the frozen gravity, else a fit to the points so far, else odom z up."""
         if self._R is not None:
             return self._R
+        if self._provisional is not None and self._provisional[0] == self._frames:
+            return self._provisional[1]
+        R = np.eye(3)
         if len(self._points) >= 3 and self._frames > 0:
             try:
-                return self._fit()
+                R = self._fit(np.random.default_rng(self._provisional_seed))[0]
             except InputError:
                 pass
-        return np.eye(3)
+        self._provisional = (self._frames, R)
+        return R
 
     # ------------------------------------------------------------------------------
     def add_floor_points(self, points_odom: np.ndarray, camera_centre_odom: np.ndarray) -> None:
@@ -132,11 +140,13 @@ class GravityEstimator:
         self._frames += 1
         if self._frames >= cfg.min_frames and len(self._points) >= cfg.min_floor_points:
             try:
-                self._R = self._fit()
+                R, inliers = self._fit(self._rng)
             except InputError:
                 return
+            self._R = R
+            self.inlier_ratio = float(inliers.mean())
             # the floor height from the plane's inliers only (table tops may be candidates)
-            self._update_floor_height(self._points[self._inliers], smoothing=1.0)
+            self._update_floor_height(self._points[inliers], smoothing=1.0)
             self._points = np.zeros((0, 3))  # no longer needed once frozen
 
     def observe_floor_heights(self, heights: np.ndarray) -> None:
@@ -149,15 +159,14 @@ class GravityEstimator:
             m = float(np.median(h))
             self.floor_height = m if self.floor_height is None else (1 - a) * self.floor_height + a * m
 
-    def _fit(self) -> np.ndarray:
-        n, off, inliers = fit_plane(self._points, self.settings, self._rng)
-        self.inlier_ratio = float(inliers.mean())
-        self._inliers = inliers
+    def _fit(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(R_plane_odom, inlier mask) of the floor points so far."""
+        n, off, inliers = fit_plane(self._points, self.settings, rng)
         centre = self._centre_sum / max(self._frames, 1)
         # gravity points from the cameras towards the floor: the cameras are above the
         # plane along up = -gravity
         up = n if (n @ centre - off) > 0 else -n
-        return rotation_from_up(up)
+        return rotation_from_up(up), inliers
 
     def _update_floor_height(self, pts: np.ndarray, smoothing: float) -> None:
         h = float(np.median(pts @ self._R[2]))
