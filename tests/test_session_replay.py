@@ -161,3 +161,13 @@ def test_floorplan_built_with_other_settings_still_replays(tmp_path, capsys):
     assert session.settings.seed == 5 and session.floorplan_settings.seed == 0
     assert main([str(path), "--check"]) == 0
     assert "identical: 12 frames checked" in capsys.readouterr().out
+
+
+def test_segment_replay_starts_fresh_and_default_out_lands_in_cwd(recorded, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main([str(recorded), "--from", "10", "--to", "18", "--set", "estimator.ransac.iterations=80"]) == 0
+    out_path = tmp_path / "walk-replay.mcap"
+    assert f"wrote {out_path.name}" in capsys.readouterr().out
+    records = list(read_session(out_path).records())
+    assert len(records) == 8 and records[0].outputs.estimate.frame == 0  # a fresh engine at frame 10
+    assert records[0].frame.timestamp == next(read_session(recorded).frames(10, 11)).timestamp

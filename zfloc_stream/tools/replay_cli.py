@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--to", dest="stop", type=int, default=None, metavar="M", help="stop before frame M (default: the end)")
     p.add_argument("--config", type=Path, help="YAML settings applied over the logged settings")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override one setting, e.g. estimator.ransac.iterations=300")
-    p.add_argument("--out", type=Path, help="write the re-run as a new session file (default with --config/--set: ./STEM-replay.mcap)")
+    p.add_argument("--out", type=Path, help="write the re-run as a new session file (default with --config/--set and no --check: ./STEM-replay.mcap)")
     p.add_argument("--salvage", action="store_true", help="read a truncated or damaged file as far as its intact chunks go")
     p.add_argument("--floorplan", type=Path, help="floorplan (ROS map YAML) for sessions that carry none, or to replace it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -108,7 +108,7 @@ def run(args) -> int:
         print(f"note: {session.path} carries no settings: replaying with the defaults (+ overrides)", file=sys.stderr)
     changed = bool(args.config or args.set)
     out = args.out
-    if out is None and changed:
+    if out is None and changed and not args.check:
         out = Path(f"{args.session.stem}-replay.mcap")
     if out is not None and out.resolve() == args.session.resolve():
         raise InputError(f"--out {out} would overwrite the session being replayed")
