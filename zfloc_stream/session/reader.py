@@ -53,9 +53,9 @@ EXPECTED_SCHEMAS = {
 # Topics whose progress decides that a timestamp is complete (calibration is a state:
 # often published once, so it must not hold frames back).
 _PROGRESS_TOPICS = (S.TOPIC_DEPTH, S.TOPIC_SCAN, S.TOPIC_LABELS, S.TOPIC_ODOMETRY, S.TOPIC_GROUND_TRUTH, S.TOPIC_STATUS)
-_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 # A topic that stops early would otherwise hold every later frame in memory.
 _MAX_PENDING_STAMPS = 16
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 
 
 @dataclass
@@ -200,8 +200,9 @@ class Session:
         where = f"t={S.ns_to_seconds(stamp):.9f}"
         has_camera, has_scan = S.TOPIC_DEPTH in parts, S.TOPIC_SCAN in parts
         if not (has_camera or has_scan):
-            if outputs.status is not None:
-                self.problems.append(f"{where}: outputs without an input frame were dropped")
+            orphans = sorted(t for t in parts if t != S.TOPIC_CALIBRATION)
+            if orphans:
+                self.problems.append(f"{where}: {', '.join(orphans)} without a {S.TOPIC_DEPTH} or {S.TOPIC_SCAN} message of the same timestamp dropped")
             return None
         if S.TOPIC_ODOMETRY not in parts:
             self.problems.append(f"{where}: frame dropped: no {S.TOPIC_ODOMETRY} message with the same timestamp")
