@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from zfloc_stream.config import Settings
-from zfloc_stream.frames import LaserFrame
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.rng import make_rng
 from zfloc_stream.sim import build_scene
@@ -111,12 +110,12 @@ def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
     frames = list(seq)
     for f in frames[:6]:
         loc.push(f)
-    odd = LaserFrame(np.full(10, np.nan), 0.0, 0.1, 0.1, 10.0, np.eye(4), 99.0)  # no valid beam
-    est = loc.push(odd)
-    assert est.skipped
+    est = loc.push("not a frame")  # what a broken source might hand over
+    assert est.skipped and "CameraFrame or LaserFrame" in est.skipped
+    assert est.frame == 6 and est.pose is None
     for f in frames[6:]:
         est = loc.push(f)
-    assert est.skipped is None and loc.frames_fused == 11
+    assert est.skipped is None and loc.frames_fused == 12 and loc.frames_pushed == 13
 
 
 @pytest.mark.slow

@@ -97,16 +97,16 @@ class ScoringSettings(Section):
 
 class RefineSettings(Section):
     huber_delta: float = 0.1  # m
-    max_evaluations: int = 50
+    max_evaluations: int = 30  # residual evaluations per hypothesis (converges in ~10)
     top_n: int = 5  # hypotheses refined
-    max_points: int = 2000  # BEV wall points used by the refinement (evenly thinned)
-    tolerance: float = 1e-6  # stop: relative cost decrease, step or gradient below this
+    max_points: int = 1000  # BEV wall points used by the refinement (evenly thinned)
+    tolerance: float = 1e-4  # stop: relative cost decrease, step or gradient below this
     initial_damping: float = 1e-3  # Levenberg-Marquardt lambda at the start
     damping_factor: float = 10.0  # lambda divided by this after a good step, multiplied after a bad one
 
 
 class RansacSettings(Section):
-    iterations: int = 500
+    iterations: int = 500  # BEV minimal samples per localization (solver drawn at random per sample)
     tracking_iterations: int = 150  # fewer fresh samples while one mode is tracked
     max_hypotheses: int = 10  # ranked distinct hypotheses returned
     match_fraction: float = 0.03  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
@@ -165,7 +165,8 @@ class FrontendSettings(Section):
     gravity: GravitySettings = GravitySettings()
     wall_mask: WallMaskSettings = WallMaskSettings()
     labeller: LabellerSettings = LabellerSettings()
-    pixel_stride: int = 4  # camera pixels used: every pixel_stride-th row and column
+    pixel_stride: int = 0  # camera pixels used: every pixel_stride-th row and column (0: automatic)...
+    target_pixels: int = 12000  # ...automatic: stride = max(1, floor(sqrt(H * W / target_pixels)))
     max_depth: float = 10.0  # m, depth readings beyond this are ignored
     min_obstacle_height: float = 0.1  # m above floor: lower non-floor points do not occupy
     max_obstacle_height: float = 2.0  # m above floor: higher points do not occupy (ceiling, lamps)
@@ -185,6 +186,7 @@ class BevSettings(Section):
     occupied_threshold: float = 0.0  # log-odds above this: occupied
     wall_min_observations: int = 1  # frames that saw wall evidence in a cell before it is a wall point
     wall_min_ratio: float = 0.5  # ...and at least this fraction of the frames that hit the cell
+    min_wall_points_per_cell: int = 3  # camera: wall points one frame must put in a cell to count (laser: 1)
     free_margin: float = 0.1  # m, rays stop this short of the obstacle they hit
     azimuth_bin_deg: float = 0.5  # camera free space: one ray per azimuth bin
     crop_margin: float = 0.5  # m, observation is cropped to the known cells plus this margin
@@ -231,6 +233,15 @@ class LocalizerSettings(Section):
     every_k_frames: int = 5  # a RANSAC round every k fused frames
     min_wall_points: int = 100  # BEV wall cells needed before the first round
     min_primitives: int = 3  # lines + circles needed before the first round
+    # Per-frame consistency monitor: while tracking, each fused frame's wall points are
+    # checked against the tracked alignment; a run of inconsistent frames means the
+    # odometry jumped (or the device was carried away): the map is cleared and the status
+    # becomes lost, which triggers a full global search.
+    monitor_distance: float = 0.3  # m, a wall point within this of a floorplan wall is consistent
+    monitor_min_consistency: float = 0.35  # fraction of consistent points below which a frame is inconsistent
+    monitor_min_points: int = 30  # frames with fewer wall points are not judged
+    monitor_max_points: int = 400  # wall points checked per frame (subsampled)
+    monitor_frames: int = 3  # consecutive inconsistent frames that declare the track lost
 
 
 class LoggingSettings(Section):

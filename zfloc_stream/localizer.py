@@ -38,6 +38,7 @@ class Localizer:
         self.frames_fused = 0
         self.last_result = None  # LocalizationResult of the latest round, for logging
         self.last_observation = None  # BevObservation of the latest round, for overlays
+        self._inconsistent_frames = 0
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -49,18 +50,20 @@ class Localizer:
             self.bev.add(frame)
             plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
         except ZflocError as err:  # one bad frame never kills the stream
-            return self._estimate(index, frame.timestamp, None, timings, skipped=str(err))
+            stamp = getattr(frame, "timestamp", float("nan"))
+            return self._estimate(index, stamp, None, timings, skipped=str(err))
         self.frames_fused += 1
         timings["fusion"] = time.perf_counter() - t0
+        self._monitor()
 
-        evidence = None
         if self.frames_fused % self.settings.localizer.every_k_frames == 0:
-            evidence = self._round(index, plane_pose, timings)
-        return self._estimate(index, frame.timestamp, plane_pose, timings, evidence=evidence)
+            self._round(index, plane_pose, timings)
+        return self._estimate(index, frame.timestamp, plane_pose, timings)
 
     # ------------------------------------------------------------------------------
-    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> bool:
-        """Extract, estimate, track. Returns whether the BEV held enough evidence."""
+    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> None:
+        """Extract primitives, estimate (warm-started), update the tracker. A BEV with too
+        little evidence skips the round: the status stays as it is (initializing at first)."""
         cfg = self.settings
         t0 = time.perf_counter()
         try:
@@ -69,7 +72,7 @@ class Localizer:
             obs = None
         timings["primitives"] = time.perf_counter() - t0
         if obs is None or not self._enough_evidence(obs):
-            return False
+            return
         self.last_observation = obs
         tracked = self.tracker.confidently_tracking
         iterations = cfg.estimator.ransac.tracking_iterations if tracked else cfg.estimator.ransac.iterations
@@ -83,21 +86,35 @@ class Localizer:
                 iterations=iterations,
             )
         except ZflocError:
-            return False
+            return
         self.last_result = result
         for key, value in result.timings.items():
             timings[key] = value
         t0 = time.perf_counter()
         self.tracker.update(result.hypotheses, plane_pose[:2], index)
         timings["tracking"] = time.perf_counter() - t0
-        return True
+
+    def _monitor(self) -> None:
+        """Declare the track lost when new frames stop agreeing with the tracked alignment."""
+        cfg = self.settings.localizer
+        points = self.bev.last_wall_hits
+        if self.tracker.status != "tracking" or len(points) < cfg.monitor_min_points:
+            return
+        points = points[:: max(1, len(points) // cfg.monitor_max_points)]
+        distances = self.floorplan.distance(self.tracker.best.alignment.apply(points))
+        consistent = np.mean(distances < cfg.monitor_distance) >= cfg.monitor_min_consistency
+        self._inconsistent_frames = 0 if consistent else self._inconsistent_frames + 1
+        if self._inconsistent_frames >= cfg.monitor_frames:
+            self._inconsistent_frames = 0
+            self.tracker.declare_lost()
+            self.bev.clear_map()
 
     def _enough_evidence(self, obs) -> bool:
         cfg = self.settings.localizer
         return len(obs.wall_points) >= cfg.min_wall_points and len(obs.lines) + len(obs.circles) >= cfg.min_primitives
 
     # ------------------------------------------------------------------------------
-    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, evidence=None) -> Estimate:
+    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None) -> Estimate:
         status = self.tracker.status
         best = self.tracker.best
         if best is None or plane_pose is None:

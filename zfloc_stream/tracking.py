@@ -126,6 +126,12 @@ class HypothesisTracker:
         self._was_lost = False
         self._status: Status = "initializing"
 
+    def declare_lost(self) -> None:
+        """Drop every mode and report lost: the localizer saw the tracked alignment stop
+        explaining new frames (e.g. an odometry jump) before any round did."""
+        self.reset()
+        self._was_lost, self._status = True, "lost"
+
     # --- the round --------------------------------------------------------------------
     def update(
         self,

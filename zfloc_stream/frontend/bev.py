@@ -78,9 +78,13 @@ class _ScrollingGrid:
         inside = (row >= 0) & (row < self.n) & (col >= 0) & (col < self.n)
         return row[inside], col[inside]
 
-    def unique_flat(self, xy: np.ndarray) -> np.ndarray:
+    def unique_flat(self, xy: np.ndarray, min_count: int = 1) -> np.ndarray:
+        """Flat indices of the cells holding at least min_count of the points."""
         row, col = self.cells(xy)
-        return np.unique(row * self.n + col)
+        if min_count <= 1:
+            return np.unique(row * self.n + col)
+        flat, counts = np.unique(row * self.n + col, return_counts=True)
+        return flat[counts >= min_count]
 
 
 def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
@@ -107,8 +111,8 @@ class RollingBEV:
         b, f = self.settings.bev, self.settings.frontend
         if b.resolution <= 0 or b.window_radius <= 0 or b.recenter_distance < 0:
             raise ConfigError("bev: resolution and window_radius must be > 0, recenter_distance >= 0")
-        if f.pixel_stride < 1 or f.max_depth <= 0:
-            raise ConfigError("frontend: pixel_stride must be >= 1 and max_depth > 0")
+        if f.pixel_stride < 0 or f.target_pixels < 1 or f.max_depth <= 0:
+            raise ConfigError("frontend: pixel_stride must be >= 0, target_pixels >= 1 and max_depth > 0")
         if b.azimuth_bin_deg <= 0 or b.trajectory_length < 1:
             raise ConfigError("bev: azimuth_bin_deg must be > 0 and trajectory_length >= 1")
         half = int(np.ceil((b.window_radius + b.recenter_distance) / b.resolution))
@@ -122,6 +126,7 @@ class RollingBEV:
         self.frames_added = 0
         self.frames_fused = 0
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
+        self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
 
     # ------------------------------------------------------------------------------
     # public API
@@ -155,6 +160,12 @@ class RollingBEV:
     def _record_pose(self, pose) -> None:
         self._trajectory[self._trajectory_count % len(self._trajectory)] = pose
         self._trajectory_count += 1
+
+    def clear_map(self) -> None:
+        """Forget the map (e.g. after the odometry jumped: old and new evidence would
+        disagree); gravity and the trajectory stay."""
+        self.grid = _ScrollingGrid(self.grid.n, self.grid.res)
+        self.last_wall_hits = np.zeros((0, 2))
 
     @property
     def pending_frames(self) -> int:
@@ -217,7 +228,7 @@ class RollingBEV:
         free_r = np.where(valid, np.maximum(r - self.settings.bev.free_margin, 0.0), 0.0)
         world_a = np.arctan2(T[1, 0], T[0, 0]) + a
         order = np.argsort(world_a) if frame.angle_increment < 0 else slice(None)
-        self._fuse(np.array([x, y]), world_a[order], free_r[order], hits, hits)
+        self._fuse(np.array([x, y]), world_a[order], free_r[order], hits, hits, min_wall_points=1)
         self._record_pose((x, y, yaw))
         self.frames_fused += 1
 
@@ -236,9 +247,17 @@ class RollingBEV:
             while self._pending:
                 self._fuse_camera(self._pending.popleft())
 
+    def pixel_stride(self, shape: tuple[int, int]) -> int:
+        """Camera pixel stride: the configured one, or (0) about target_pixels per frame, so
+        the fusion cost does not grow with the image resolution."""
+        f = self.settings.frontend
+        if f.pixel_stride > 0:
+            return f.pixel_stride
+        return max(1, int(np.sqrt(shape[0] * shape[1] / f.target_pixels)))
+
     def _strided(self, frame: CameraFrame):
         """Every stride-th pixel: depth, labels, K of that sub-image, unit-depth rays."""
-        s = self.settings.frontend.pixel_stride
+        s = self.pixel_stride(frame.shape)
         o = s // 2
         depth = frame.depth[o::s, o::s]
         labels = None if frame.labels is None else frame.labels[o::s, o::s]
@@ -302,7 +321,8 @@ class RollingBEV:
         # free space: rays to floor points end there, rays to walls stop free_margin short
         ray_end = is_floor | is_wall_label
         angles, ranges = self._azimuth_bins(centre, sensor[2], xy[ray_end], is_wall_label[ray_end])
-        self._fuse(centre, angles, ranges, xy[obstacle | wall], xy[wall])
+        # a wall stacks many pixels onto one cell; isolated (noisy) wall points do not count
+        self._fuse(centre, angles, ranges, xy[obstacle | wall], xy[wall], self.settings.bev.min_wall_points_per_cell)
         self._record_pose(sensor)
         self.frames_fused += 1
 
@@ -324,9 +344,18 @@ class RollingBEV:
 
     # ------------------------------------------------------------------------------
     # the shared update
-    def _fuse(self, centre: np.ndarray, angles: np.ndarray, free_ranges: np.ndarray, hits: np.ndarray, wall_hits: np.ndarray) -> None:
+    def _fuse(
+        self,
+        centre: np.ndarray,
+        angles: np.ndarray,
+        free_ranges: np.ndarray,
+        hits: np.ndarray,
+        wall_hits: np.ndarray,
+        min_wall_points: int,
+    ) -> None:
         b = self.settings.bev
         g = self.grid
+        self.last_wall_hits = wall_hits  # the localizer checks each frame against the tracked alignment
         g.centre_on(centre, self._slack)
         hit_flat = g.unique_flat(hits)
         # free polygon, drawn on a crop around it only
@@ -350,7 +379,7 @@ class RollingBEV:
         flat_lo = g.logodds.reshape(-1)
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
         _increment(g.hits, hit_flat)
-        _increment(g.wall, g.unique_flat(wall_hits))
+        _increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
 
 
 def _increment(counts: np.ndarray, flat: np.ndarray) -> None:
