@@ -131,8 +131,9 @@ def test_geometric_labeller_matches_rendered_labels():
     rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(f.K).T
     pts = ((rays * f.depth[..., None]) @ f.T_odom_cam[:3, :3].T + f.T_odom_cam[:3, 3]) @ R.T
     valid = f.depth > 0
-    # full resolution here, so the baseline of the BEV's strided image: stride * step pixels
-    normals = depth_normals(pts, f.depth, valid, s.labeller.normal_step * s.pixel_stride)
+    # full resolution here, as the BEV does on images this small (stride 1)
+    assert bev.pixel_stride(f.shape) == 1
+    normals = depth_normals(pts, f.depth, valid, s.labeller.normal_step)
     labels = label_frame(pts[..., 2] - bev.gravity.floor_height, normals, valid, s.labeller)
     truth = f.labels
     for code, min_recall in ((FLOOR, 0.9), (CEILING, 0.85), (WALL, 0.6)):
