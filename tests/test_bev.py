@@ -142,3 +142,15 @@ def test_camera_fusion_puts_walls_on_walls_and_memory_stays_flat():
         sizes.append(bev.memory_bytes())
     assert len(set(sizes)) == 1
     assert bev.observation(make_rng(0)).free.size <= bev.grid.n**2
+
+
+def test_clear_map_forgets_the_grid_but_keeps_the_trajectory():
+    bev = RollingBEV(Settings())
+    for i in range(3):
+        bev.add(laser(2 + i, 3, 0.0, t=i))
+    bev.clear_map()
+    with pytest.raises(InputError, match="empty"):
+        bev.observation(make_rng(0))
+    assert len(bev.trajectory) == 3
+    bev.add(laser(6, 3, 0.0, t=4))
+    assert len(bev.observation(make_rng(0)).wall_points) > 100
