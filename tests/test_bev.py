@@ -154,3 +154,22 @@ def test_clear_map_forgets_the_grid_but_keeps_the_trajectory():
     assert len(bev.trajectory) == 3
     bev.add(laser(6, 3, 0.0, t=4))
     assert len(bev.observation(make_rng(0)).wall_points) > 100
+
+
+def test_upside_down_laser_and_negative_increment():
+    # the same room seen by a scanner mounted upside down (sensor y, z flipped) whose
+    # beams run clockwise: beam directions come from the pose, not from the yaw alone
+    x, y, yaw = 4.0, 3.0, 0.5
+    n = 360
+    angles = np.pi - 2 * np.pi * np.arange(n) / n  # decreasing
+    flip = np.diag([1.0, -1.0, -1.0])  # upside down: sensor angle a points at world angle -a
+    T = pose(x, y, yaw)
+    T[:3, :3] = T[:3, :3] @ flip
+    r = box_ranges(x, y, yaw, -angles)
+    scan = LaserFrame(r, np.pi, -2 * np.pi / n, 0.05, 30.0, T, 0.0)
+    bev = RollingBEV(Settings())
+    bev.add(scan)
+    obs = bev.observation(make_rng(0))
+    assert np.quantile(distance_to_box_walls(obs.wall_points), 0.99) < 0.1
+    inner = np.stack(np.meshgrid(np.linspace(1, 9, 20), np.linspace(1, 5, 10)), -1).reshape(-1, 2)
+    assert obs.free_at(inner).mean() > 0.95

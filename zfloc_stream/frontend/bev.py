@@ -173,9 +173,11 @@ class RollingBEV:
 
     def memory_bytes(self) -> int:
         """Bytes held by the grid, buffers and trajectory (for the flat-memory check)."""
+        g = self.grid
         pending = sum(f.depth.nbytes + (0 if f.labels is None else f.labels.nbytes) for f in self._pending)
         rays = sum(r.nbytes for r in self._ray_cache.values())
-        return self.grid.logodds.nbytes + self.grid.wall.nbytes + self.grid.hits.nbytes + pending + rays + self._trajectory.nbytes + self.gravity._points.nbytes
+        grid = g.logodds.nbytes + g.wall.nbytes + g.hits.nbytes
+        return grid + pending + rays + self._trajectory.nbytes + self.gravity.buffered_bytes
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
         b = self.settings.bev
@@ -222,13 +224,14 @@ class RollingBEV:
         T = frame.T_odom_sensor
         valid = frame.valid
         a, r = frame.angles, frame.ranges
-        local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
-        hits = (local[valid] @ T[:3, :3].T + T[:3, 3])[:, :2]
-        # free polygon: one vertex per beam, stopping short of the hit; no-returns give none
+        beams = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1) @ T[:3, :3].T  # odom directions
+        hits = (beams[valid] * r[valid, None] + T[:3, 3])[:, :2]
+        # free polygon: one vertex per beam (in beam order, whatever the mounting), stopping
+        # short of the hit; no-returns give none
+        centre = np.array([x, y])
         free_r = np.where(valid, np.maximum(r - self.settings.bev.free_margin, 0.0), 0.0)
-        world_a = np.arctan2(T[1, 0], T[0, 0]) + a
-        order = np.argsort(world_a) if frame.angle_increment < 0 else slice(None)
-        self._fuse(np.array([x, y]), world_a[order], free_r[order], hits, hits, min_wall_points=1)
+        flat = beams[:, :2] / np.maximum(np.linalg.norm(beams[:, :2], axis=1, keepdims=True), 1e-12)
+        self._fuse(centre, centre + free_r[:, None] * flat, hits, hits, min_wall_points=1)
         self._record_pose((x, y, yaw))
         self.frames_fused += 1
 
@@ -321,8 +324,9 @@ class RollingBEV:
         # free space: rays to floor points end there, rays to walls stop free_margin short
         ray_end = is_floor | is_wall_label
         angles, ranges = self._azimuth_bins(centre, sensor[2], xy[ray_end], is_wall_label[ray_end])
+        ends = centre + ranges[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
         # a wall stacks many pixels onto one cell; isolated (noisy) wall points do not count
-        self._fuse(centre, angles, ranges, xy[obstacle | wall], xy[wall], self.settings.bev.min_wall_points_per_cell)
+        self._fuse(centre, ends, xy[obstacle | wall], xy[wall], self.settings.bev.min_wall_points_per_cell)
         self._record_pose(sensor)
         self.frames_fused += 1
 
@@ -347,8 +351,7 @@ class RollingBEV:
     def _fuse(
         self,
         centre: np.ndarray,
-        angles: np.ndarray,
-        free_ranges: np.ndarray,
+        free_ends: np.ndarray,
         hits: np.ndarray,
         wall_hits: np.ndarray,
         min_wall_points: int,
@@ -359,9 +362,9 @@ class RollingBEV:
         g.centre_on(centre, self._slack)
         hit_flat = g.unique_flat(hits)
         # free polygon, drawn on a crop around it only
-        if len(angles) and free_ranges.max() > 0:
-            ends = centre + free_ranges[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
-            poly = np.concatenate([centre[None], ends]) / b.resolution - [g.ix0, g.iy0]  # cell units
+        # (free_ends: (K, 2) polygon vertices ordered by angle around the centre)
+        if len(free_ends):
+            poly = np.concatenate([centre[None], free_ends]) / b.resolution - [g.ix0, g.iy0]  # cell units
             lo_c = np.clip(np.floor(poly.min(axis=0)).astype(int) - 1, 0, g.n)
             hi_c = np.clip(np.ceil(poly.max(axis=0)).astype(int) + 2, 0, g.n)
             if (hi_c > lo_c).all():

@@ -104,6 +104,11 @@ class GravityEstimator:
     def up_odom(self) -> np.ndarray:
         return self.R_plane_odom[2]
 
+    @property
+    def buffered_bytes(self) -> int:
+        """Memory held by the floor points waiting for the fit (bounded by max_points)."""
+        return self._points.nbytes
+
     def provisional_R(self) -> np.ndarray:
         """Best current guess: the frozen gravity, else a fit to the points so far, else odom z up."""
         if self._R is not None:
