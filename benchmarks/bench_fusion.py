@@ -78,8 +78,11 @@ def main() -> None:
     t0 = time.perf_counter()
     views, _ = camera_sequence(rng, args.views, width=args.width, height=args.height, noise=0.0015)
     unlabelled = [CameraFrame(f.depth, None, f.K, f.T_odom_cam, f.timestamp) for f in views]
-    print(f"rendered {args.views} views {args.width}x{args.height} in {time.perf_counter() - t0:.1f} s; "
-          f"stride {RollingBEV(settings).pixel_stride((args.height, args.width))}, BEV {settings.bev.resolution} m cells, window {settings.bev.window_radius} m")
+    stride = RollingBEV(settings).pixel_stride((args.height, args.width))
+    print(
+        f"rendered {args.views} views {args.width}x{args.height} in {time.perf_counter() - t0:.1f} s; "
+        f"pixel stride {stride}, BEV {settings.bev.resolution} m cells, window {settings.bev.window_radius} m"
+    )
 
     # --- per-frame time (gravity already known: steady state) --------------------------
     for name, frames in (("labelled camera", views), ("unlabelled camera (geometric labeller)", unlabelled)):

@@ -141,7 +141,9 @@ def camera_sequence(
         T_wc = camera_pose(x, y, 1.4 + 0.1 * np.sin(i), yaw, axis, tilt)
         depth, lab = render(scene, T_wc, K, width, height, noise, rng)
         frames.append(
-            CameraFrame(depth, lab if labels else None, K, T_odom_world @ T_wc, float(i), ground_truth=np.array([x, y, yaw]))
+            CameraFrame(
+                depth, lab if labels else None, K, T_odom_world @ T_wc, float(i), ground_truth=np.array([x, y, yaw])
+            )
         )
     return frames, T_odom_world
 

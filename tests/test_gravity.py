@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from frontend_scene import camera_sequence, intrinsics, random_odom_from_world, render, room_scene, camera_pose
+from frontend_scene import camera_sequence
 
 from zfloc_stream.config import GravitySettings, load_settings
 from zfloc_stream.errors import InputError
@@ -90,7 +90,8 @@ def test_frames_wait_for_gravity_in_a_bounded_buffer():
     rng = make_rng(2, "pending")
     frames, _ = camera_sequence(rng, 8)
     walls_only = [
-        CameraFrame(f.depth, np.full(f.depth.shape, WALL, dtype=np.uint8), f.K, f.T_odom_cam, f.timestamp) for f in frames[:6]
+        CameraFrame(f.depth, np.full(f.depth.shape, WALL, dtype=np.uint8), f.K, f.T_odom_cam, f.timestamp)
+        for f in frames[:6]
     ]
     for f in walls_only:  # no floor: gravity cannot be estimated
         bev.add(f)
@@ -183,3 +184,24 @@ def test_asking_for_poses_before_gravity_does_not_change_it():
         asking.add(f)
         asking.plane_pose(f)  # provisional fits while gravity is unknown
     assert np.array_equal(quiet.gravity.R_plane_odom, asking.gravity.R_plane_odom)
+
+
+def test_gravity_estimator_freezes_after_enough_frames_and_points():
+    rng = make_rng(8, "estimator")
+    up = np.array([0.1, -0.05, 1.0])
+    up /= np.linalg.norm(up)
+    basis = np.linalg.svd(up[None])[2][1:]
+    settings = GravitySettings(min_frames=2, min_floor_points=300)
+    est = GravityEstimator(settings, make_rng(0, "g"))
+    camera = 1.5 * up  # above the floor plane through the origin
+    for frame in range(2):
+        assert not est.ready
+        floor = rng.uniform(-4, 4, (400, 2)) @ basis + rng.normal(0, 0.005, (400, 1)) * up
+        table = rng.uniform(-0.5, 0.5, (100, 2)) @ basis + 0.75 * up  # not the floor
+        est.add_floor_points(np.concatenate([floor, table]), camera)
+    assert est.ready
+    assert angle_deg(est.up_odom, up) < 0.3  # signed: up, towards the cameras
+    assert est.floor_height == pytest.approx(0.0, abs=0.01)  # table tops do not lift the floor
+    assert est.buffered_bytes == 0  # points are released once gravity is frozen
+    est.observe_floor_heights(np.full(10, 0.1))  # slow vertical drift is followed
+    assert 0.0 < est.floor_height < 0.1
