@@ -98,7 +98,7 @@ class ScoringSettings(Section):
 class RefineSettings(Section):
     huber_delta: float = 0.1  # m
     max_evaluations: int = 30  # residual evaluations per hypothesis (converges in ~10)
-    top_n: int = 5  # hypotheses refined
+    top_n: int = 10  # hypotheses refined (in one vectorised batch)
     max_points: int = 1000  # BEV wall points used by the refinement (evenly thinned)
     tolerance: float = 1e-4  # stop: relative cost decrease, step or gradient below this
     initial_damping: float = 1e-3  # Levenberg-Marquardt lambda at the start

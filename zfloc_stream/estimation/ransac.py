@@ -30,6 +30,10 @@ Solvers whose primitives are missing (no circles -> no 2C / LC) are dropped.
 
 Scoring is coarse to fine (scoring.py); the top refine.top_n distinct hypotheses are
 refined (refine.py), rescored with the full C and the list re-ranked and de-duplicated.
+
+Input: a BEV with neither lines nor circles is an InputError. A BEV whose primitives
+suit no enabled solver (e.g. two lines at free scale) is not an error: the result simply
+holds no hypothesis (besides re-scored warm starts), as early in a stream.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2
-from .refine import refine
+from .refine import refine_batch
 from .scoring import BevView, distinct, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
 
@@ -307,6 +311,18 @@ class BevSamples:
         self.pairs = pairs
         self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
         self.circle_pairs, self.circle_dist = _circle_pairs(self.circles, solvers.min_baseline)
+        # Sampling weights: a line sample is as trustworthy as its shortest line (short
+        # segments are often clutter, door jambs or fragments with no floorplan match), so
+        # samples are drawn with probability proportional to that length.
+        lengths = self.lines.lengths
+        self.triplet_p = _probabilities(lengths[tri].min(axis=1) if len(tri) else np.zeros(0))
+        self.pair_p = _probabilities(lengths[pairs].min(axis=1) if len(pairs) else np.zeros(0))
+        self.line_circle_p = _probabilities(lengths[self.line_circle[:, 0]] if len(self.line_circle) else np.zeros(0))
+
+
+def _probabilities(weights: np.ndarray) -> np.ndarray | None:
+    total = float(np.sum(weights))
+    return weights / total if len(weights) and total > 0 else None
 
 
 # --------------------------------------------------------------------------------------
@@ -319,7 +335,7 @@ def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
-    picks = bev.triplets[rng.integers(len(bev.triplets), size=n)]
+    picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.triplets.rows[row]
@@ -329,7 +345,7 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
-    picks = bev.pairs[rng.integers(len(bev.pairs), size=n)]
+    picks = bev.pairs[rng.choice(len(bev.pairs), size=n, p=bev.pair_p)]
     starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.pairs.rows[row]
@@ -340,7 +356,7 @@ def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
 
 
 def _models_lc(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
-    picks = bev.line_circle[rng.integers(len(bev.line_circle), size=n)]
+    picks = bev.line_circle[rng.choice(len(bev.line_circle), size=n, p=bev.line_circle_p)]
     starts = np.zeros((n, 1), dtype=np.int64)
     sizes = np.full((n, 1), len(fp.line_circle), dtype=np.int64)
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
@@ -470,7 +486,7 @@ def localize(
     n_refine = min(cfg.refine.top_n, len(top))
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
-        refined = np.array([refine(floorplan, obs.wall_points, cand[i], cfg.refine, cfg.scale_mode, scale_bounds) for i in range(n_refine)])
+        refined = refine_batch(floorplan, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
         rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
         better = rescored.total >= total[:n_refine]  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]

@@ -33,10 +33,14 @@ def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
     return points[np.unique(np.linspace(0, len(points) - 1, max_points).astype(np.int64))]
 
 
-def field_gradient(floorplan, q: np.ndarray) -> np.ndarray:
-    """(N, 2) gradient of the bilinear f^c at points q (zero along clamped axes outside)."""
-    field = np.asarray(floorplan.distance_field)
-    h, w = field.shape
+def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """f^c at points q (N, 2) exactly as Floorplan.distance computes it (bilinear between
+    cell centres; outside the grid the edge value plus the distance to the grid), and its
+    gradient (N, 2) (that of the bilinear interpolant; the outside term is left out), in
+    one pass over the four neighbouring cells."""
+    grid = np.asarray(floorplan.distance_field)
+    h, w = grid.shape
+    field = grid.ravel()  # a view for the (C-contiguous) field: no copy per call
     res = float(floorplan.resolution)
     u = (q[:, 0] - floorplan.origin[0]) / res - 0.5
     v = (q[:, 1] - floorplan.origin[1]) / res - 0.5
@@ -44,18 +48,22 @@ def field_gradient(floorplan, q: np.ndarray) -> np.ndarray:
     c0 = np.minimum(uc.astype(np.int64), w - 2)
     r0 = np.minimum(vc.astype(np.int64), h - 2)
     fu, fv = uc - c0, vc - r0
-    f00, f01 = field[r0, c0], field[r0, c0 + 1]
-    f10, f11 = field[r0 + 1, c0], field[r0 + 1, c0 + 1]
-    gu = (f01 - f00) * (1.0 - fv) + (f11 - f10) * fv
-    gv = (f10 - f00) * (1.0 - fu) + (f11 - f01) * fu
-    inside_u = (u > 0) & (u < w - 1)
-    inside_v = (v > 0) & (v < h - 1)
-    return np.stack([np.where(inside_u, gu, 0.0), np.where(inside_v, gv, 0.0)], axis=1) / res
+    i = r0 * w + c0
+    f00, f01, f10, f11 = field[i], field[i + 1], field[i + w], field[i + w + 1]
+    bottom = f00 + (f01 - f00) * fu
+    top = f10 + (f11 - f10) * fu
+    value = bottom + (top - bottom) * fv + np.hypot(u - uc, v - vc) * res
+    gu = (f01 - f00) + (f11 - f10 - f01 + f00) * fv
+    gv = top - bottom
+    gu = np.where(u == uc, gu, 0.0) / res
+    gv = np.where(v == vc, gv, 0.0) / res
+    return value, np.stack([gu, gv], axis=1)
 
 
-def huber_cost(r: np.ndarray, delta: float) -> float:
+def huber_cost(r: np.ndarray, delta: float) -> np.ndarray:
+    """Huber loss summed over the last axis."""
     a = np.abs(r)
-    return float(np.where(a <= delta, 0.5 * r * r, delta * (a - 0.5 * delta)).sum())
+    return np.where(a <= delta, 0.5 * r * r, delta * (a - 0.5 * delta)).sum(axis=-1)
 
 
 def refine(
@@ -67,64 +75,91 @@ def refine(
     scale_bounds: tuple[float, float] = (0.5, 2.0),
 ) -> np.ndarray:
     """Refined model row (tx, ty, theta, s); the input model if nothing improves."""
-    model = np.asarray(model, dtype=float).reshape(4)
+    return refine_batch(floorplan, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds)[0]
+
+
+def refine_batch(
+    floorplan,
+    points: np.ndarray,
+    models,
+    settings: RefineSettings = RefineSettings(),
+    scale_mode: ScaleMode = "free",
+    scale_bounds: tuple[float, float] = (0.5, 2.0),
+) -> np.ndarray:
+    """Refine several models (H, 4) at once: each has its own damping and stopping test,
+    but every LM iteration evaluates all still-active models in one vectorised pass (the
+    per-call overhead, not the arithmetic, dominates a 4-parameter problem)."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    out = models.copy()
     pts = thin_points(points, settings.max_points)
-    if len(pts) < 4 or not np.isfinite(model).all() or model[3] <= 0:
-        return model
     free_scale = scale_mode != "fixed"
     lo, hi = np.log(scale_bounds[0]), np.log(scale_bounds[1])
-    if free_scale and not lo <= np.log(model[3]) <= hi:
-        return model
+    with np.errstate(all="ignore"):
+        log_s = np.log(models[:, 3])
+    ok = np.isfinite(models).all(axis=1) & (models[:, 3] > 0)
+    if free_scale:
+        ok &= (log_s >= lo) & (log_s <= hi)
+    if len(pts) < 4 or not ok.any():
+        return out
     delta = settings.huber_delta
     n_par = 4 if free_scale else 3
 
-    def evaluate(p):
-        s = np.exp(p[3])
-        c, sn = np.cos(p[2]), np.sin(p[2])
+    def evaluate(P):
+        """Residuals f^c(T_p(x)) (A, N) and their Jacobians (A, N, n_par)."""
+        s = np.exp(P[:, 3:4])
+        c, sn = np.cos(P[:, 2:3]), np.sin(P[:, 2:3])
         rx = s * (c * pts[:, 0] - sn * pts[:, 1])
         ry = s * (sn * pts[:, 0] + c * pts[:, 1])
-        q = np.stack([rx + p[0], ry + p[1]], axis=1)
-        return floorplan.distance(q), rx, ry, q
+        q = np.stack([rx + P[:, 0:1], ry + P[:, 1:2]], axis=-1)
+        r, g = field_value_and_gradient(floorplan, q.reshape(-1, 2))
+        r, g = r.reshape(rx.shape), g.reshape(*rx.shape, 2)
+        J = np.empty((*rx.shape, n_par))
+        J[..., 0], J[..., 1] = g[..., 0], g[..., 1]
+        J[..., 2] = g[..., 1] * rx - g[..., 0] * ry
+        if free_scale:
+            J[..., 3] = g[..., 0] * rx + g[..., 1] * ry
+        return r, J
 
-    def jacobian(rx, ry, q):
-        g = field_gradient(floorplan, q)
-        cols = [g[:, 0], g[:, 1], -g[:, 0] * ry + g[:, 1] * rx, g[:, 0] * rx + g[:, 1] * ry]
-        return np.stack(cols[:n_par], axis=1)
-
-    p = np.array([model[0], model[1], model[2], np.log(model[3])])
-    r, rx, ry, q = evaluate(p)
+    P = np.column_stack([models[ok, :3], log_s[ok]])
+    r, J = evaluate(P)
     cost = huber_cost(r, delta)
-    J = jacobian(rx, ry, q)
-    lam = settings.initial_damping
+    lam = np.full(len(P), settings.initial_damping)
+    active = np.ones(len(P), dtype=bool)
     evaluations = 1
-    while evaluations < settings.max_evaluations:
-        a = np.abs(r)
-        w = np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-300))
-        H = J.T @ (w[:, None] * J)
-        g = J.T @ (w * r)
-        if not np.isfinite(H).all() or np.abs(g).max() < settings.tolerance:
-            break
-        A = H + lam * np.diag(np.maximum(np.diag(H), 1e-12))
+    while evaluations < settings.max_evaluations and active.any():
+        a = np.flatnonzero(active)
+        ra, Ja = r[a], J[a]
+        absr = np.abs(ra)
+        w = np.where(absr <= delta, 1.0, delta / np.maximum(absr, 1e-300))
+        WJt = (Ja * w[..., None]).transpose(0, 2, 1)
+        H = WJt @ Ja  # J^T W J, (A, p, p)
+        g = (WJt @ ra[..., None])[..., 0]  # J^T W r, (A, p)
+        done = ~np.isfinite(H).all(axis=(1, 2)) | (np.abs(g).max(axis=1) < settings.tolerance)
+        diag = np.maximum(np.diagonal(H, axis1=1, axis2=2), 1e-12)
+        A = H + (lam[a, None] * diag)[:, :, None] * np.eye(n_par)
         try:
-            step = np.linalg.solve(A, -g)
+            step = np.linalg.solve(np.where(done[:, None, None], np.eye(n_par), A), -g[..., None])[..., 0]
         except np.linalg.LinAlgError:
             break
-        trial = p.copy()
-        trial[:n_par] += step
-        trial[3] = np.clip(trial[3], lo, hi) if free_scale else p[3]
-        r_new, rx_new, ry_new, q_new = evaluate(trial)
+        trial = P[a].copy()
+        trial[:, :n_par] += step
+        trial[:, 3] = np.clip(trial[:, 3], lo, hi) if free_scale else P[a, 3]
+        r_new, J_new = evaluate(trial)
         evaluations += 1
         cost_new = huber_cost(r_new, delta)
-        if cost_new < cost:
-            converged = cost - cost_new <= settings.tolerance * max(cost, 1e-12)
-            p, r, cost = trial, r_new, cost_new
-            J = jacobian(rx_new, ry_new, q_new)
-            lam = max(lam / settings.damping_factor, 1e-12)
-            if converged or np.abs(step).max() < settings.tolerance:
-                break
-        else:
-            lam *= settings.damping_factor
-            if lam > 1e12:
-                break
-    out = np.array([p[0], p[1], (p[2] + np.pi) % (2 * np.pi) - np.pi, np.exp(p[3])])
-    return out if np.isfinite(out).all() else model
+        better = (cost_new < cost[a]) & ~done
+        converged = better & (
+            (cost[a] - cost_new <= settings.tolerance * np.maximum(cost[a], 1e-12)) | (np.abs(step).max(axis=1) < settings.tolerance)
+        )
+        b = a[better]
+        P[b], r[b], J[b], cost[b] = trial[better], r_new[better], J_new[better], cost_new[better]
+        lam[b] = np.maximum(lam[b] / settings.damping_factor, 1e-12)
+        worse = a[~better & ~done]
+        lam[worse] *= settings.damping_factor
+        active[a[done | converged]] = False
+        active[worse[lam[worse] > 1e12]] = False
+    refined = np.column_stack([P[:, 0], P[:, 1], (P[:, 2] + np.pi) % (2 * np.pi) - np.pi, np.exp(P[:, 3])])
+    finite = np.isfinite(refined).all(axis=1)
+    idx = np.flatnonzero(ok)
+    out[idx[finite]] = refined[finite]
+    return out

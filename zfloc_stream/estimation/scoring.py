@@ -71,16 +71,17 @@ class FloorplanScorer:
         self.shape = field.shape
         self.origin = np.asarray(floorplan.origin, dtype=float)
         self.resolution = float(floorplan.resolution)
-        # Boolean "within tau_c of a wall" per cell, for the coarse nearest-cell test. The
-        # outermost ring of cells is cleared so that points clamped onto the border from
-        # outside the grid count as far from any wall (no separate inside test needed).
-        # Points sit up to half a cell diagonal from their cell centre (where the field is
-        # sampled); the half-cell margin makes the test about unbiased against the
-        # bilinear lookup of the full score.
-        near = field < settings.tau_c + 0.5 * self.resolution
-        near[[0, -1], :] = False
-        near[:, [0, -1]] = False
-        self.near_wall = np.ascontiguousarray(near).ravel()
+        # Coarse grid: f^c per cell quantised to uint8 on [0, cap), 255 = "not near a
+        # wall" (f^c >= cap). cap = tau_c plus half a cell: points sit up to half a cell
+        # diagonal from the cell centre where the field is sampled, and the margin makes
+        # the nearest-cell test about unbiased against the bilinear full score. The
+        # outermost ring is 255 so points clamped onto the border from outside the grid
+        # count as far from any wall (no separate inside test needed).
+        self.cap = settings.tau_c + 0.5 * self.resolution
+        coarse = np.where(field < self.cap, np.floor(field / self.cap * 255.0), 255.0).astype(np.uint8)
+        coarse[[0, -1], :] = 255
+        coarse[:, [0, -1]] = 255
+        self.coarse_field = np.ascontiguousarray(coarse).ravel()
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
         # under a hypothesis' footprint are a few contiguous index ranges.
         walls = np.asarray(floorplan.sample_wall_points(), dtype=float).reshape(-1, 2)
@@ -95,8 +96,12 @@ class FloorplanScorer:
         self.bucket_start = np.concatenate([[0], np.cumsum(counts)])  # points of bucket b: [start[b], start[b + 1])
 
     def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
-        """Cc by nearest-cell lookup in the near-wall grid (points outside the grid count
-        as far from any wall)."""
+        """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
+        far from any wall), with ties broken by closeness: the value is
+        Cc - mean(min(f^c, cap) / cap) / (n + 1) for n points, which orders exactly as
+        (Cc, then smaller mean distance). Many hypotheses of one correspondence cluster
+        reach the same Cc on few points; the tie-break makes the cluster's most precise
+        member its representative, which is the one worth re-scoring and refining."""
         models = np.asarray(models, dtype=float).reshape(-1, 4)
         out = np.zeros(len(models))
         if len(points) == 0 or len(models) == 0:
@@ -116,7 +121,10 @@ class FloorplanScorer:
             row = np.clip(b * px + a * py + cv, 0, h - 1).astype(np.int32)
             row *= w
             row += col
-            out[sl] = self.near_wall[row].mean(axis=1)
+            q = self.coarse_field[row]
+            near = (q < 255).sum(axis=1)
+            spread = q.sum(axis=1, dtype=np.int64) / (255.0 * len(points))
+            out[sl] = (near - spread / (1.0 + 1.0 / len(points))) / len(points)
         return out
 
     def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
