@@ -238,10 +238,10 @@ class LocalizerSettings(Section):
     # odometry jumped (or the device was carried away): the map is cleared and the status
     # becomes lost, which triggers a full global search.
     monitor_distance: float = 0.3  # m, a wall point within this of a floorplan wall is consistent
-    monitor_min_consistency: float = 0.35  # fraction of consistent points below which a frame is inconsistent
+    monitor_min_consistency: float = 0.05  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = 30  # frames with fewer wall points are not judged
     monitor_max_points: int = 400  # wall points checked per frame (subsampled)
-    monitor_frames: int = 3  # consecutive inconsistent frames that declare the track lost
+    monitor_frames: int = 4  # consecutive inconsistent frames that declare the track lost
 
 
 class LoggingSettings(Section):
