@@ -85,7 +85,7 @@ def cmd_demo(args) -> int:
     from ..sim import SimSettings, build_scene, simulate
     from .session_runner import run_session
 
-    settings = _settings(args).model_copy(update={"seed": args.seed})
+    settings = load_settings(args.config, args.set, base_overrides={"seed": args.seed})
     if args.frames < 1:
         raise ZflocError("--frames must be at least 1")
     scene = build_scene(args.scene, seed=args.seed)
