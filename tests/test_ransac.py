@@ -175,3 +175,21 @@ def test_bad_input_raises_input_error(plain):
         localize(fp, obs, CFG.estimator, make_rng(0, "t"), scale_prior=0.0)
     with pytest.raises(InputError, match="iterations"):
         localize(fp, obs, CFG.estimator, make_rng(0, "t"), iterations=-1)
+
+
+def test_bev_neighbourhood_is_lifted_when_it_leaves_no_sample():
+    """Three walls of a big hall seen in parts: the observed segments are farther apart
+    than the neighbour distance, yet a 3L sample must still be drawn."""
+    lines = LineSet.from_endpoints(
+        [
+            [[0.0, 0.0], [8.0, 0.0]],  # bottom
+            [[20.0, 10.0], [20.0, 18.0]],  # right, 10 m from the bottom segment
+            [[-12.0, 14.0], [-12.0, 20.0]],  # left
+        ]
+    )
+    free = np.ones((4, 4), dtype=bool)
+    obs = BevObservation(lines.endpoints.reshape(-1, 2), np.zeros(2), 0.05, free, np.ones((4, 4)), lines=lines)
+    near = BevSamples(obs, CFG.primitives.lines, CFG.estimator.solvers, 6.0)
+    assert len(near.triplets) > 0  # fallback: every line is a neighbour
+    assert {tuple(sorted(t)) for t in near.triplets.tolist()} == {(0, 1, 2)}
+    assert np.isclose(near.triplet_p.sum(), 1.0)

@@ -299,24 +299,39 @@ class BevSamples:
         par = np.deg2rad(solvers.parallel_angle_deg)
         alpha = _normal_angles(self.lines)
         self.alpha = alpha
+        # BEV segments are observed parts of floorplan walls, so two BEV lines can be
+        # farther apart than their floorplan counterparts: when no admissible sample exists
+        # within the neighbour distance, the restriction is lifted rather than giving up.
+        everyone = [np.delete(np.arange(len(self.lines)), i) for i in range(len(self.lines))]
+
+        def triplets(nb):
+            tri = _ordered_triplets(nb)
+            if len(tri):
+                a = alpha[tri]
+                tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
+            return tri
+
+        def pairs_of(nb):
+            pairs = _ordered_pairs(nb)
+            if len(pairs):
+                pairs = pairs[~_parallel_mod_pi(alpha[pairs[:, 0]], alpha[pairs[:, 1]], par)]
+            return pairs
+
         neighbours = _neighbour_lists(self.lines, neighbour_distance)
-        tri = _ordered_triplets(neighbours)
-        if len(tri):
-            a = alpha[tri]
-            tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
-        self.triplets = tri
-        pairs = _ordered_pairs(neighbours)
-        if len(pairs):
-            pairs = pairs[~_parallel_mod_pi(alpha[pairs[:, 0]], alpha[pairs[:, 1]], par)]
-        self.pairs = pairs
+        tri = triplets(neighbours)
+        self.triplets = tri if len(tri) else triplets(everyone)
+        pairs = pairs_of(neighbours)
+        self.pairs = pairs if len(pairs) else pairs_of(everyone)
         self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
+        if not len(self.line_circle):
+            self.line_circle = _line_circle_pairs(self.lines, self.circles, np.inf, solvers.min_baseline)
         self.circle_pairs, self.circle_dist = _circle_pairs(self.circles, solvers.min_baseline)
         # Sampling weights: a line sample is as trustworthy as its shortest line (short
         # segments are often clutter, door jambs or fragments with no floorplan match), so
         # samples are drawn with probability proportional to that length.
         lengths = self.lines.lengths
-        self.triplet_p = _probabilities(lengths[tri].min(axis=1) if len(tri) else np.zeros(0))
-        self.pair_p = _probabilities(lengths[pairs].min(axis=1) if len(pairs) else np.zeros(0))
+        self.triplet_p = _probabilities(lengths[self.triplets].min(axis=1) if len(self.triplets) else np.zeros(0))
+        self.pair_p = _probabilities(lengths[self.pairs].min(axis=1) if len(self.pairs) else np.zeros(0))
         self.line_circle_p = _probabilities(lengths[self.line_circle[:, 0]] if len(self.line_circle) else np.zeros(0))
 
 
