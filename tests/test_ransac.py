@@ -8,7 +8,7 @@ import pytest
 
 from test_scoring import RES, building, observe  # synthetic floorplan + BEV helpers
 
-from zfloc_stream.config import EstimatorSettings, Settings
+from zfloc_stream.config import Settings
 from zfloc_stream.errors import InputError
 from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
 from zfloc_stream.estimation.ransac import BevSamples, floorplan_matches, solver_pool

@@ -47,7 +47,6 @@ import numpy as np
 
 from ..config import EstimatorSettings, FloorplanSettings, LineSettings, Settings, SolverSettings
 from ..errors import InputError
-from ..floorplan import _segment_distances as segment_distances
 from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
@@ -101,11 +100,26 @@ def _point_segment_distance(p: np.ndarray, ends: np.ndarray) -> np.ndarray:
     return np.linalg.norm(p[:, None] - (a + t[..., None] * d), axis=-1)
 
 
+def _segment_distance_matrix(ends: np.ndarray) -> np.ndarray:
+    """(S, S) distance between segments (S, 2, 2): the smallest endpoint-to-segment
+    distance, or 0 where two segments cross."""
+    to_seg = _point_segment_distance(ends.reshape(-1, 2), ends).reshape(len(ends), 2, len(ends))
+    d = to_seg.min(axis=1)  # d[i, j]: closest endpoint of i to segment j
+    d = np.minimum(d, d.T)
+    a, b = ends[:, None, 0], ends[:, None, 1]
+    c, e = ends[None, :, 0], ends[None, :, 1]
+
+    def side(p, q, r):  # sign of the turn p -> q -> r
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    crossing = (side(a, b, c) * side(a, b, e) < 0) & (side(c, e, a) * side(c, e, b) < 0)
+    return np.where(crossing, 0.0, d)
+
+
 def _neighbour_lists(lines: LineSet, distance: float) -> list[np.ndarray]:
-    e = lines.endpoints
-    if len(e) == 0:
+    if len(lines) == 0:
         return []
-    near = segment_distances(e[:, 0], e[:, 1], e[:, 0], e[:, 1]) < distance
+    near = _segment_distance_matrix(lines.endpoints) < distance
     np.fill_diagonal(near, False)
     return [np.flatnonzero(row) for row in near]
 
