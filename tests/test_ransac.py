@@ -193,3 +193,22 @@ def test_bev_neighbourhood_is_lifted_when_it_leaves_no_sample():
     assert len(near.triplets) > 0  # fallback: every line is a neighbour
     assert {tuple(sorted(t)) for t in near.triplets.tolist()} == {(0, 1, 2)}
     assert np.isclose(near.triplet_p.sum(), 1.0)
+
+
+def test_refinement_converges_without_scale_bias(plain):
+    """From a perturbed start the LM + Huber refinement (on the wall-surface field) lands on
+    the true alignment; with the plain f^c (0 inside thick walls) BEV walls could slide
+    into the walls and inflate the scale."""
+    from zfloc_stream.estimation.refine import refine
+    from zfloc_stream.estimation.scoring import floorplan_scorer
+
+    fp, truth, obs = plain
+    field = floorplan_scorer(fp, CFG.estimator.scoring).face_field
+    start = np.array([truth.t[0] + 0.2, truth.t[1] - 0.15, truth.theta + 0.03, truth.s * 1.03])
+    out = refine(field, obs.wall_points, start, CFG.estimator.refine)
+    fitted = Sim2(out[3], out[2], out[:2])
+    assert pose_error(fitted, truth)[0] < 0.03
+    assert abs(fitted.s / truth.s - 1) < 0.005
+    assert abs(np.rad2deg(wrap_angle(fitted.theta - truth.theta))) < 0.3
+    fixed = refine(field, obs.wall_points, start, CFG.estimator.refine, scale_mode="fixed")
+    assert fixed[3] == start[3]  # fixed scale is not touched

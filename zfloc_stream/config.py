@@ -252,6 +252,8 @@ class LoggingSettings(Section):
     chunk_size: int = 1048576  # bytes; a chunk is closed once its records exceed this...
     chunk_max_frames: int = 10  # ...or after this many frames: bounds what a crash loses
     bev_every_n_frames: int = 10  # publish /zfloc/bev every n frames (0 = never)
+    background: bool = True  # compress + write on a worker thread (the caller only serializes)
+    max_pending_batches: int = 4  # batches (2 per frame) queued for the worker; a crash loses them too
     foreign_scan_range_min: float = 0.01  # m, LaserScan without zfloc range metadata
     foreign_scan_range_max: float = 100.0  # m
     success_distance: float = 1.0  # m, replay summary: SR@1m as in the paper...

@@ -52,7 +52,7 @@ from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2
 from .refine import refine_batch
-from .scoring import BevView, distinct, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
@@ -515,7 +515,8 @@ def localize(
     n_refine = min(cfg.refine.top_n, len(top))
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
-        refined = refine_batch(floorplan, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
+        field = floorplan_scorer(floorplan, cfg.scoring).face_field
+        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
         rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
         better = rescored.total >= total[:n_refine]  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]

@@ -34,7 +34,8 @@ def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
 
 
 def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """f^c at points q (N, 2) exactly as Floorplan.distance computes it (bilinear between
+    """A distance field (floorplan.distance_field on its grid) at points q (N, 2), exactly
+    as Floorplan.distance computes f^c (bilinear between
     cell centres; outside the grid the edge value plus the distance to the grid), and its
     gradient (N, 2) (that of the bilinear interpolant; the outside term is left out), in
     one pass over the four neighbouring cells."""
@@ -67,7 +68,7 @@ def huber_cost(r: np.ndarray, delta: float) -> np.ndarray:
 
 
 def refine(
-    floorplan,
+    field,
     points: np.ndarray,
     model,
     settings: RefineSettings = RefineSettings(),
@@ -75,11 +76,11 @@ def refine(
     scale_bounds: tuple[float, float] = (0.5, 2.0),
 ) -> np.ndarray:
     """Refined model row (tx, ty, theta, s); the input model if nothing improves."""
-    return refine_batch(floorplan, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds)[0]
+    return refine_batch(field, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds)[0]
 
 
 def refine_batch(
-    floorplan,
+    field,
     points: np.ndarray,
     models,
     settings: RefineSettings = RefineSettings(),
@@ -88,7 +89,10 @@ def refine_batch(
 ) -> np.ndarray:
     """Refine several models (H, 4) at once: each has its own damping and stopping test,
     but every LM iteration evaluates all still-active models in one vectorised pass (the
-    per-call overhead, not the arithmetic, dominates a 4-parameter problem)."""
+    per-call overhead, not the arithmetic, dominates a 4-parameter problem).
+
+    field: anything with distance_field, origin and resolution (a Floorplan, or the
+    estimator's wall-face field, scoring.FaceField)."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     out = models.copy()
     pts = thin_points(points, settings.max_points)
@@ -111,7 +115,7 @@ def refine_batch(
         rx = s * (c * pts[:, 0] - sn * pts[:, 1])
         ry = s * (sn * pts[:, 0] + c * pts[:, 1])
         q = np.stack([rx + P[:, 0:1], ry + P[:, 1:2]], axis=-1)
-        r, g = field_value_and_gradient(floorplan, q.reshape(-1, 2))
+        r, g = field_value_and_gradient(field, q.reshape(-1, 2))
         r, g = r.reshape(rx.shape), g.reshape(*rx.shape, 2)
         J = np.empty((*rx.shape, n_par))
         J[..., 0], J[..., 1] = g[..., 0], g[..., 1]
