@@ -223,3 +223,49 @@ def test_unknown_truth_is_not_logged_and_bad_truth_is_refused(tmp_path):
             log.write_frame(1, dataclasses.replace(b, ground_truth=np.zeros(2)))
     frames = list(read_session(tmp_path / "s.mcap").frames())
     assert len(frames) == 1 and frames[0].ground_truth is None
+
+
+def test_background_and_inline_writing_give_the_same_bytes(tmp_path):
+    frames = camera_frames(7, seed=4)
+    for mode in ("true", "false"):
+        settings = load_settings(overrides=[f"logging.background={mode}", "logging.chunk_max_frames=2"])
+        write_fake_session(tmp_path / f"{mode}.mcap", frames, settings)
+    def records(name):  # every chunk and message, in file order (the settings YAML differs)
+        from mcap.records import Chunk, Message
+        from mcap.stream_reader import StreamReader
+
+        with open(tmp_path / name, "rb") as f:
+            return [(r.data, getattr(r, "log_time", None)) for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk | Message)]
+
+    assert records("true.mcap") == records("false.mcap") and len(records("true.mcap")) >= 4
+
+
+class _DiskFull:
+    """A file whose writes fail like a full disk."""
+
+    def write(self, data):
+        raise OSError(28, "No space left on device")
+
+    def flush(self):
+        pass
+
+    def tell(self):
+        return 0
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("background", ["true", "false"])
+def test_write_failures_become_session_log_errors(tmp_path, background):
+    settings = load_settings(overrides=[f"logging.background={background}", "logging.chunk_max_frames=1"])
+    log = SessionWriter(tmp_path / "s.mcap", settings)
+    log._sink._file = log._file = _DiskFull()  # the disk fills up mid-run
+    log._mcap._Writer__stream = log._file
+    with pytest.raises(SessionLogError, match=r"s\.mcap: writing the session failed: No space left on device"):
+        for i, frame in enumerate(camera_frames(6)):  # the worker's failure surfaces on a later call
+            log.write_frame(i, frame)
+        log.close()
+    log.close()  # closing again is harmless
+    with pytest.raises(SessionLogError, match="writing the session failed"):
+        SessionWriter("/dev/full", settings)

@@ -13,18 +13,20 @@ the same bits, which is what `zfloc-replay --check` verifies.
 Crash safety: settings and floorplan are written first, outside chunks; chunks are closed
 every `logging.chunk_max_frames` frames (or `chunk_size` bytes) and handed to the OS after
 every frame, so a process killed at any point leaves the finished chunks readable with
-`read_session(path, salvage=True)`.
+`read_session(path, salvage=True)`. With `logging.background` (default) compression and
+file writes run on one worker thread (sink.py); at most `logging.max_pending_batches`
+batches (two per frame) wait there, and a crash loses those too.
 """
 
 from __future__ import annotations
 
+import contextlib
 import tempfile
 from pathlib import Path
 
 import numpy as np
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
-from mcap_protobuf.schema import build_file_descriptor_set
 
 from .. import __version__
 from ..config import Settings, dump_settings
@@ -33,6 +35,7 @@ from ..estimate import Estimate
 from ..frames import CameraFrame, LaserFrame
 from . import schemas as S
 from .assemble import laser_frame_from_msgs
+from .sink import Record, RecordSink
 
 _OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -92,14 +95,24 @@ class SessionWriter:
         except OSError as err:
             raise SessionLogError(f"cannot create session file {self.path}: {err.strerror or err}") from None
         self._mcap = Writer(self._file, chunk_size=self._cfg.chunk_size, compression=_COMPRESSION[self._cfg.compression])
-        self._mcap.start(profile="", library=f"zfloc-stream/{__version__}")
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[tuple, int] = {}
+        self._batch: list[Record] = []  # the messages of the call in progress
+        self._close_chunk_first = False
         self._frames_in_chunk = 0
         self._last_frame: tuple[float, int] | None = None  # (timestamp as logged, ns)
         self._closed = False
+        self._failed = False  # a write failed (reported once); close() only releases the file
         self.frames_written = 0
-        # Settings and floorplan first, outside chunks: a truncated file still has them.
+        try:
+            self._start(settings, floorplan, metadata)
+        except OSError as err:
+            with contextlib.suppress(OSError):
+                self._file.close()
+            raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
+        self._sink = RecordSink(self._mcap, self._file, self._cfg.background, self._cfg.max_pending_batches)
+
+    def _start(self, settings: Settings, floorplan, metadata) -> None:
+        """Header, then settings and floorplan, outside chunks: a truncated file keeps them."""
+        self._mcap.start(profile="", library=f"zfloc-stream/{__version__}")
         text = dump_settings(settings)
         self._mcap.add_metadata(S.METADATA_SETTINGS, {"yaml": text, S.CRC_KEY: S.crc32_hex(text.encode())})
         info = {"format": S.SESSION_FORMAT, "writer": f"zfloc-stream/{__version__}"}
@@ -127,10 +140,18 @@ class SessionWriter:
         if self._closed:
             return
         self._closed = True
+        if self._failed:  # already reported: the file ends where the disk refused it
+            self._sink.abandon()
+            with contextlib.suppress(OSError):
+                self._file.close()
+            return
         try:
-            self._mcap.finish()
-        finally:
+            self._sink.finish()
             self._file.close()
+        except OSError as err:
+            with contextlib.suppress(OSError):
+                self._file.close()
+            raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
 
     # --- inputs -------------------------------------------------------------------------
     def write_frame(self, index: int, frame: CameraFrame | LaserFrame) -> CameraFrame | LaserFrame:
@@ -172,8 +193,9 @@ class SessionWriter:
                 f"{self.path}: frame {index} timestamp {timestamp} is not after the previous frame's: "
                 "a session needs strictly increasing timestamps"
             )
-        if self._frames_in_chunk >= self._cfg.chunk_max_frames:
-            self._mcap.flush()  # close the chunk: bounds what a crash can lose
+        self._batch = []
+        self._close_chunk_first = self._frames_in_chunk >= self._cfg.chunk_max_frames  # bounds a crash's loss
+        if self._close_chunk_first:
             self._frames_in_chunk = 0
         if self._floorplan_to_draw is not None:
             plan, self._floorplan_to_draw = self._floorplan_to_draw, None
@@ -182,10 +204,19 @@ class SessionWriter:
         return ns
 
     def _end_frame(self, timestamp: float, ns: int) -> None:
+        self._submit()
         self._last_frame = (timestamp, ns)
         self._frames_in_chunk += 1
         self.frames_written += 1
-        self._file.flush()
+
+    def _submit(self) -> None:
+        batch, self._batch = self._batch, []
+        close, self._close_chunk_first = self._close_chunk_first, False
+        try:
+            self._sink.submit(batch, close)
+        except OSError as err:
+            self._failed = True
+            raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
 
     def _write_camera(self, index: int, frame: CameraFrame, ns: int) -> CameraFrame:
         h, w = frame.depth.shape
@@ -228,6 +259,7 @@ class SessionWriter:
         self._check_open()
         ns = self._estimate_ns(estimate)
         seq = int(estimate.frame)
+        self._batch = []
         if estimate.pose is not None:
             self._write(S.TOPIC_POSE, S.estimate_pose_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})
         self._write(S.TOPIC_HYPOTHESES, S.hypotheses_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})
@@ -237,7 +269,7 @@ class SessionWriter:
             if grid is not None:
                 self._write(S.TOPIC_BEV, S.grid_to_msg(grid, ns), ns, seq)
         self._write_json(S.TOPIC_STATUS, S.status_to_json(estimate), ns, seq)
-        self._file.flush()
+        self._submit()
 
     def _estimate_ns(self, estimate: Estimate) -> int:
         # Same log time as its frame's messages, even where float seconds cannot hold ns.
@@ -250,30 +282,13 @@ class SessionWriter:
         if self._closed:
             raise SessionLogError(f"session file {self.path} is already closed")
 
-    def _channel(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes, message_encoding: str, metadata: dict) -> int:
-        key = (topic, schema_name, tuple(sorted(metadata.items())))
-        channel = self._channels.get(key)
-        if channel is None:
-            schema = self._schemas.get(schema_name)
-            if schema is None:
-                schema = self._mcap.register_schema(name=schema_name, encoding=schema_encoding, data=schema_data)
-                self._schemas[schema_name] = schema
-            channel = self._mcap.register_channel(topic=topic, message_encoding=message_encoding, schema_id=schema, metadata=metadata)
-            self._channels[key] = channel
-        return channel
-
     def _write(self, topic: str, msg, ns: int, sequence: int, metadata: dict | None = None) -> None:
-        name = type(msg).DESCRIPTOR.full_name
-        if name not in self._schemas:
-            data = build_file_descriptor_set(type(msg)).SerializeToString()
-        else:
-            data = b""
-        channel = self._channel(topic, name, SchemaEncoding.Protobuf, data, MessageEncoding.Protobuf, metadata or {})
-        self._mcap.add_message(channel, log_time=ns, data=msg.SerializeToString(), publish_time=ns, sequence=sequence)
+        cls = type(msg)
+        meta = tuple(sorted((metadata or {}).items()))
+        self._batch.append(Record(topic, cls.DESCRIPTOR.full_name, SchemaEncoding.Protobuf, cls, MessageEncoding.Protobuf, meta, ns, sequence, msg.SerializeToString()))
 
     def _write_json(self, topic: str, payload: dict, ns: int, sequence: int) -> None:
-        channel = self._channel(topic, S.STATUS_SCHEMA_NAME, SchemaEncoding.JSONSchema, S.STATUS_JSON_SCHEMA_BYTES, MessageEncoding.JSON, {})
-        self._mcap.add_message(channel, log_time=ns, data=S.encode_status(payload), publish_time=ns, sequence=sequence)
+        self._batch.append(Record(topic, S.STATUS_SCHEMA_NAME, SchemaEncoding.JSONSchema, S.STATUS_JSON_SCHEMA_BYTES, MessageEncoding.JSON, (), ns, sequence, S.encode_status(payload)))
 
     def _attach_floorplan(self, floorplan) -> None:
         with tempfile.TemporaryDirectory(prefix="zfloc-floorplan-") as tmp:
