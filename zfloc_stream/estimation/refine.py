@@ -1,18 +1,21 @@
 """Model refinement (paper 3.4): min over p = (tx, ty, theta, log s) of
-sum_x huber(f^c(T_p(x))) over BEV wall points x.
+sum_x huber(f(T_p(x))) over BEV wall points x, f a wall distance field.
 
 Solver choice: a Levenberg-Marquardt loop with Huber weights (iteratively reweighted
-least squares), written here. scipy.optimize.least_squares was the first choice and was
-measured: method="lm" (MINPACK) does not support a robust loss, and method="trf" with
-loss="huber" spends ~0.8 ms of per-iteration overhead on this 4-parameter problem
-(6-9 ms per hypothesis, 5 hypotheses per localization), several times the cost of the
-residual itself. One LM step here is a 4x4 solve on J^T W J, so refining costs ~1-2 ms.
+least squares), written here and vectorised over hypotheses. scipy.optimize.least_squares
+was the first choice and was measured: method="lm" (MINPACK) does not support a robust
+loss, and method="trf" with loss="huber" spends ~0.8 ms of per-iteration overhead on this
+4-parameter problem (6-9 ms per hypothesis), several times the cost of the residual
+itself. One LM step here is a batch of 4x4 solves on J^T W J for all hypotheses at once.
 Algorithm: weights w_i = min(1, delta / |r_i|) (the Huber IRLS weights), step
 (H + lambda diag H) dp = -g with H = J^T W J, g = J^T W r; a step is accepted only if the
 Huber cost decreases (lambda / factor), otherwise lambda * factor and retry.
 
-f^c is the floorplan's bilinear distance field (Floorplan.distance); its Jacobian is
-analytic: the gradient of the bilinear interpolant chained with
+The field is given by the caller: localize() passes the wall-SURFACE field
+(scoring.FaceField) rather than the floorplan's f^c, which is 0 inside thick walls and so
+lets a BEV scaled a few percent too large rest inside them. Values are bilinear like
+Floorplan.distance; the Jacobian is analytic: the gradient of the bilinear interpolant
+chained with
 d x' / d(tx, ty, theta, log s) = (e_x, e_y, perp(s R x), s R x). In fixed-scale mode
 log s is held constant (3 parameters); otherwise it is clamped to the solvers' scale
 bounds (shrinking the BEV onto one wall would otherwise drive every residual to zero).

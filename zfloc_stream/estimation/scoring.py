@@ -8,11 +8,18 @@ Cv (violation): floorplan wall points mapped back into the BEV by the inverse tr
 of those landing in observed free space, the fraction whose clearance f^v exceeds tau_v
 (a wall where the sensor saw open floor). No floorplan wall in free space: Cv = 0.
 
-Coarse to fine: every hypothesis is first ranked by Cc on a few points sampled along the
-BEV lines, with a nearest-cell lookup in a precomputed boolean "near a wall" grid (the
-cheapest possible test, ~10 array operations per point). The best top_k DISTINCT
-hypotheses (greedy non-maximum suppression on the implied pose of the BEV centroid) are
-then re-ranked with the full score: bilinear f^c on all BEV wall points, and Cv.
+Coarse to fine: every hypothesis is first ranked by Cc on at most max_sparse_points
+points sampled along the BEV lines, with a nearest-cell lookup in a precomputed uint8 grid
+(~10 array operations per point; ties broken by closeness, see coarse_consistency). The
+coarse grid measures to the wall surfaces seen from inside the building (FaceField), not
+to any wall cell, so BEV walls pushed into a thick wall are not "consistent" there. The
+best top_k DISTINCT hypotheses (greedy non-maximum suppression on the implied pose of the
+BEV centroid) are then re-ranked with the full score: the floorplan's bilinear f^c on all
+BEV wall points (the paper's Cc), and Cv.
+
+Cv deviation from the paper: f^v is the distance to the nearest cell that is not observed
+free (see BevView), which tolerates free space touching walls seen at grazing incidence.
+
 Everything is vectorised over hypotheses, in chunks of at most chunk_size
 (hypotheses x points) elements to bound memory.
 """
@@ -104,7 +111,8 @@ class FaceField:
 
 
 class FloorplanScorer:
-    """Floorplan data the scores read, built once per (floorplan, tau_c)."""
+    """Floorplan data the scores read (surface field, coarse grid, bucketed wall points
+    for Cv), built once per floorplan object and settings."""
 
     def __init__(self, floorplan, settings: ScoringSettings):
         self.floorplan = floorplan
@@ -113,8 +121,8 @@ class FloorplanScorer:
         self.shape = field.shape
         self.origin = np.asarray(floorplan.origin, dtype=float)
         self.resolution = float(floorplan.resolution)
-        # Coarse grid: f^c per cell quantised to uint8 on [0, cap), 255 = "not near a
-        # wall" (f^c >= cap). cap = tau_c plus half a cell: points sit up to half a cell
+        # Coarse grid: the surface distance per cell quantised to uint8 on [0, cap), 255 =
+        # "not near a wall" (>= cap). cap = tau_c plus half a cell: points sit up to half a cell
         # diagonal from the cell centre where the field is sampled, and the margin makes
         # the nearest-cell test about unbiased against the bilinear full score. The
         # outermost ring is 255 so points clamped onto the border from outside the grid
