@@ -55,7 +55,7 @@ def close_to(models, T: Sim2, tol=1e-9):
     err_t = np.abs(models[:, :2] - T.translation).max(axis=1)
     err_a = np.abs(wrap_angle(models[:, 2] - T.theta))
     err_s = np.abs(models[:, 3] - T.s)
-    return bool(((err_t < tol * 100) & (err_a < tol) & (err_s < tol)).any())
+    return bool(((err_t < tol) & (err_a < tol) & (err_s < tol)).any())
 
 
 def assert_clean(models, source):
