@@ -71,7 +71,7 @@ class FloorplanSettings(Section):
 
 class SolverSettings(Section):
     pool: list[SolverName] = ["3L", "2L", "2C", "LC"]
-    normal_consistency: float = 0.95  # tau_p, cosine threshold for 3L pruning
+    normal_consistency: float = 0.95  # tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L) before solving
     scale_prior_ggd_shape: float = 4.0  # 2L: generalised Gaussian noise on the metric scale
     scale_prior_prob: float = 0.8  # P(|eps| <= scale_prior_window * s) = this
     scale_prior_window: float = 0.1
