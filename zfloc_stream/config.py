@@ -390,7 +390,7 @@ def load_settings(
             loaded = yaml.safe_load(path.read_text()) or {}
         except FileNotFoundError:
             raise ConfigError(f"config file not found: {path}") from None
-        except (OSError, yaml.YAMLError) as err:
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
             raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: top level must be a mapping")

@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from ..config import Settings, _dotted_to_nested, _merge, settings_from_dict
-from ..errors import ConfigError, SessionLogError
+from ..config import Settings, load_settings
+from ..errors import SessionLogError
 from ..estimate import Estimate
 from . import schemas as S
 from .reader import FrameRecord, LoggedOutputs, Session
@@ -71,31 +70,7 @@ def replay_settings(session: Session, config: str | Path | None = None, override
     """The session's logged settings (defaults if it has none; or `base`), then a YAML
     file, then dotted.key=value overrides."""
     base = base or session.settings or Settings()
-    data = base.model_dump()
-    source = f"{session.path} (logged settings)"
-    if config is not None:
-        path = Path(config)
-        try:
-            loaded = yaml.safe_load(path.read_text()) or {}
-        except FileNotFoundError:
-            raise ConfigError(f"config file not found: {path}") from None
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-            raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
-        if not isinstance(loaded, dict):
-            raise ConfigError(f"{path}: top level must be a mapping")
-        data = _merge(data, loaded)
-        source = f"{source} + {path}"
-    for item in overrides or []:
-        if "=" not in item:
-            raise ConfigError(f"override '{item}' must look like dotted.key=value")
-        key, raw = item.split("=", 1)
-        try:
-            value = yaml.safe_load(raw)
-        except yaml.YAMLError:
-            raise ConfigError(f"override '{item}': value is not valid YAML") from None
-        data = _merge(data, _dotted_to_nested(key.strip(), value))
-        source = f"{source} + overrides"
-    return settings_from_dict(data, source)
+    return load_settings(config, overrides, base_overrides=base.model_dump())
 
 
 # --- comparison -----------------------------------------------------------------------------
