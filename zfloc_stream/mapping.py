@@ -54,7 +54,7 @@ def rasterize_scans(
     """Log-odds grid (H, W), row 0 = smallest y, and its origin (x, y), from scans
     (sensor poses (N, 3) in the map frame, beams as in a LaserFrame)."""
     res = cfg.resolution
-    ends, hits, polygons = [], [], []
+    hits, fans = [], []  # per scan: beam ends that hit; sensor + free-space ends of every beam
     for pose, r, a0, da, rmax in zip(poses, ranges, angle_min, angle_increment, max_range):
         r = np.asarray(r, dtype=float)
         angles = pose[2] + a0 + da * np.arange(r.size)
@@ -65,19 +65,19 @@ def rasterize_scans(
         reach = np.where(valid, r - cfg.free_margin, np.where(finite, r, rmax))
         reach = np.clip(reach, 0.0, cfg.free_range)
         direction = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-        polygons.append(np.vstack([pose[:2], pose[:2] + reach[:, None] * direction]))
+        fans.append(np.vstack([pose[:2], pose[:2] + reach[:, None] * direction]))
         hits.append(pose[:2] + r[valid, None] * direction[valid])
-    if not polygons:
+    if not fans:
         raise InputError("map-from-log: no scan left to map (every scan excluded?)")
-    every = np.vstack(polygons + hits)
+    every = np.vstack(fans + hits)
     lo = np.floor((every.min(axis=0) - cfg.padding) / res) * res
     hi = every.max(axis=0) + cfg.padding
     width, height = (np.ceil((hi - lo) / res).astype(int) + 1).tolist()
     logodds = np.zeros((height, width), dtype=np.float32)
     scale = 1 << SUBPIXEL_BITS
-    for polygon, hit in zip(polygons, hits):
+    for fan, hit in zip(fans, hits):
         # pixel coordinates: cell (row, col) centre sits at integer (col, row) for cv2
-        px = (polygon - lo) / res - 0.5
+        px = (fan - lo) / res - 0.5
         c0, r0 = np.maximum(np.floor(px.min(axis=0)).astype(int) - 1, 0)
         c1, r1 = np.minimum(np.ceil(px.max(axis=0)).astype(int) + 2, [width, height])
         free = np.zeros((r1 - r0, c1 - c0), dtype=np.uint8)

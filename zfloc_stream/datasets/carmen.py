@@ -53,13 +53,6 @@ class CarmenLog:
     def __len__(self) -> int:
         return len(self.ranges)
 
-    def endpoints(self, index: int, min_range: float) -> tuple[np.ndarray, np.ndarray]:
-        """(beam angles in the world frame (n,), valid-return mask (n,)) of one scan."""
-        r = self.ranges[index]
-        angles = self.angle_min[index] + self.angle_increment[index] * np.arange(r.size) + self.poses[index, 2]
-        valid = np.isfinite(r) & (r >= min_range) & (r < self.max_range[index])
-        return angles, valid
-
 
 def open_text(path: Path):
     """Text handle on a plain or gzipped file (decided by content, not by suffix)."""
@@ -80,8 +73,7 @@ def looks_like_carmen(head: bytes) -> bool:
 
 
 def _floats(tokens: list[str]) -> np.ndarray:
-    values = np.array([float(t) for t in tokens])
-    return values
+    return np.array([float(t) for t in tokens])
 
 
 def _parse_flaser(tokens: list[str], cfg) -> tuple:
