@@ -107,7 +107,7 @@ def cmd_run(args) -> int:
     floorplan = None
     if args.floorplan is not None:
         floorplan = Floorplan.load(args.floorplan, resolution=args.resolution, origin=args.origin, settings=settings)
-    sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed)
+    sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed, settings=settings)
     if sequence.settings_overrides:
         settings = load_settings(args.config, args.set, base_overrides=sequence.settings_overrides)
     outcome = run_session(
