@@ -239,19 +239,26 @@ class SimSequence:
 DEFAULT_FRAMES = 100
 
 
-def simulate(scene: Scene | str, settings: SimSettings | None = None, seed: int = 0, n_frames: int | None = None,
-             trajectory=None) -> SimSequence:
-    """A camera sequence of n_frames (default 100) along a seeded random walk, or along
-    `trajectory` ((N, 3) true x, y, theta, e.g. from trajectory_through; all of it unless
-    n_frames is given). `scene` may be a built-in name (built with the same seed)."""
-    settings = settings or SimSettings()
+def _true_poses(scene, settings: MotionSettings, seed: int, n_frames: int | None, trajectory):
+    """The scene (built from a name if needed) and the true (N, 3) poses of a sequence:
+    a seeded random walk of n_frames (default 100), or the given trajectory (all of it
+    unless n_frames is given). Shared by the camera and laser simulators."""
     scene = _scene(scene, seed)
     if trajectory is None:
         n_frames = DEFAULT_FRAMES if n_frames is None else n_frames
     if n_frames is not None and n_frames < 1:
         raise InputError(f"n_frames must be >= 1, got {n_frames}")
     ws = _walk_settings(settings)
-    poses = _trajectory(scene, trajectory, make_rng(seed, "sim", scene.name, "walk"), n_frames, ws)
+    return scene, _trajectory(scene, trajectory, make_rng(seed, "sim", scene.name, "walk"), n_frames, ws)
+
+
+def simulate(scene: Scene | str, settings: SimSettings | None = None, seed: int = 0, n_frames: int | None = None,
+             trajectory=None) -> SimSequence:
+    """A camera sequence of n_frames (default 100) along a seeded random walk, or along
+    `trajectory` ((N, 3) true x, y, theta, e.g. from trajectory_through; all of it unless
+    n_frames is given). `scene` may be a built-in name (built with the same seed)."""
+    settings = settings or SimSettings()
+    scene, poses = _true_poses(scene, settings, seed, n_frames, trajectory)
     rng = make_rng(seed, "sim", "sequence")
     n = len(poses)
     scale = float(rng.uniform(1.0 - settings.scale_error, 1.0 + settings.scale_error))
@@ -325,13 +332,7 @@ def simulate_laser(scene: Scene | str, settings: LaserSimSettings | None = None,
     """A 2D laser sequence of n_frames (default 100) along a seeded random walk, or along
     `trajectory` (all of it unless n_frames is given)."""
     settings = settings or LaserSimSettings()
-    scene = _scene(scene, seed)
-    if trajectory is None:
-        n_frames = DEFAULT_FRAMES if n_frames is None else n_frames
-    if n_frames is not None and n_frames < 1:
-        raise InputError(f"n_frames must be >= 1, got {n_frames}")
-    ws = _walk_settings(settings)
-    poses = _trajectory(scene, trajectory, make_rng(seed, "sim", scene.name, "walk"), n_frames, ws)
+    scene, poses = _true_poses(scene, settings, seed, n_frames, trajectory)
     rng = make_rng(seed, "sim", "laser", "sequence")
     odom = drift_odometry(poses, 1.0, rng, settings.odom_translation_noise,
                           np.radians(settings.odom_yaw_noise_deg), _odom_origin(rng, settings.odom_origin_range))
