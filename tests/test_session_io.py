@@ -200,17 +200,18 @@ def test_errors_name_the_file_and_fault(tmp_path):
         read_session(tmp_path / "nodepth.mcap")
 
 
-def test_writer_refuses_non_increasing_time_and_bad_paths(tmp_path):
-    frames = camera_frames(2)
+def test_writer_keeps_repeated_and_backward_times_in_order_and_refuses_bad_paths(tmp_path):
+    frames = camera_frames(3)
     with SessionWriter(tmp_path / "s.mcap", Settings()) as log:
         log.write_frame(0, frames[1])
-        with pytest.raises(SessionLogError, match="strictly increasing"):
-            log.write_frame(1, frames[0])
+        with pytest.warns(UserWarning, match="kept in arrival order"):
+            log.write_frame(1, frames[1])  # repeated stamp (a Carmen log printed with 6 digits)
+        log.write_frame(2, frames[0])  # backwards: kept, warned once only
         with pytest.raises(SessionLogError, match="cannot log a"):
-            log.write_frame(1, "frame")
+            log.write_frame(3, "frame")
     with pytest.raises(SessionLogError, match="cannot create"):
         SessionWriter(tmp_path / "no" / "dir" / "s.mcap", Settings())
-    assert len(list(read_session(tmp_path / "s.mcap").frames())) == 1  # closed cleanly after the errors
+    assert len(list(read_session(tmp_path / "s.mcap").frames())) == 3  # every frame kept, closed cleanly
 
 
 def test_unknown_truth_is_not_logged_and_bad_truth_is_refused(tmp_path):

@@ -264,8 +264,13 @@ class OdometrySettings(Section):
     """Synthetic odometry for logs whose poses are ground truth (Gibson(t), Carmen): the
     localizer only ever sees relative motion, re-expressed from a random odom origin."""
 
-    noise: float = 0.0  # drift fraction: per-step translation noise std = noise * step length (0 = exact relative motion)
-    heading_noise_per_m: float = 0.05  # rad per metre travelled, scaled by noise (heading drift from translation)
+    # Per step (real wheel odometry / VIO): translation std per axis = noise * step length +
+    # translation_floor, heading std = noise * (|turn| + heading_noise_per_m * step length) +
+    # heading_floor_deg. noise 0 means the exact relative motion (the floors are off too).
+    noise: float = 0.02  # drift fraction; real-data default (the issue-9 benchmark's model)
+    heading_noise_per_m: float = 0.0  # rad per metre travelled, scaled by noise (heading drift from translation)
+    translation_floor: float = 0.005  # m per axis per step, when noise > 0
+    heading_floor_deg: float = 0.3  # deg per step, when noise > 0
     origin_extent: float = 50.0  # m, odom origin drawn uniformly in [-extent, extent]^2, heading uniform
 
 

@@ -152,8 +152,9 @@ def synthetic_odometry(truth: np.ndarray, cfg: OdometrySettings, rng: np.random.
     """(n, 3) odometry poses from (n, 3) ground-truth poses.
 
     Only the relative motion of the truth survives: each step's body-frame motion gets
-    Gaussian drift (translation std = noise * step length per axis, heading std =
-    noise * (|turn| + heading_noise_per_m * step length)) and the chain starts from a
+    Gaussian drift (translation std = noise * step length + translation_floor per axis,
+    heading std = noise * (|turn| + heading_noise_per_m * step length) + heading_floor_deg;
+    the floors only when noise > 0) and the chain starts from a
     random origin and heading, so no absolute pose leaks to the localizer.
     """
     truth = np.asarray(truth, dtype=float).reshape(-1, 3)
@@ -171,8 +172,10 @@ def synthetic_odometry(truth: np.ndarray, cfg: OdometrySettings, rng: np.random.
     turn = wrap_angle(np.diff(truth[:, 2]))
     length = np.linalg.norm(step, axis=1)
     # draws happen even at noise 0 so the origin does not depend on the noise level
-    step = step + rng.standard_normal(step.shape) * (noise * length)[:, None]
-    turn = turn + rng.standard_normal(turn.shape) * noise * (np.abs(turn) + cfg.heading_noise_per_m * length)
+    floor_xy = cfg.translation_floor if noise > 0 else 0.0
+    floor_turn = np.deg2rad(cfg.heading_floor_deg) if noise > 0 else 0.0
+    step = step + rng.standard_normal(step.shape) * (noise * length + floor_xy)[:, None]
+    turn = turn + rng.standard_normal(turn.shape) * (noise * (np.abs(turn) + cfg.heading_noise_per_m * length) + floor_turn)
     # chain the noisy steps from the random origin
     heading = origin[2] + np.concatenate([[0.0], np.cumsum(turn)])
     c, s = np.cos(heading[:-1]), np.sin(heading[:-1])

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,7 @@ class SessionWriter:
         self._close_chunk_first = False
         self._frames_in_chunk = 0
         self._last_frame: tuple[float, int] | None = None  # (timestamp as logged, ns)
+        self._warned_time = False  # a repeated / backwards timestamp was reported
         self._closed = False
         self._failed = False  # a write failed (reported once); close() only releases the file
         self.frames_written = 0
@@ -189,10 +191,17 @@ class SessionWriter:
         self._check_open()
         ns = S.seconds_to_ns(timestamp) if ns is None else ns
         if self._last_frame is not None and ns <= self._last_frame[1]:
-            raise SessionLogError(
-                f"{self.path}: frame {index} timestamp {timestamp} is not after the previous frame's: "
-                "a session needs strictly increasing timestamps"
-            )
+            # Real logs repeat stamps (printed with few digits) or run backwards a little:
+            # the frame keeps its own timestamp, its log time moves 1 ns past the previous
+            # frame's so the file stays in arrival order and every frame stays its own.
+            if not self._warned_time:
+                warnings.warn(
+                    f"{self.path}: frame {index} timestamp {timestamp} is not after the previous frame's "
+                    f"({self._last_frame[0]}); kept in arrival order (warned once per session)",
+                    stacklevel=3,
+                )
+                self._warned_time = True
+            ns = self._last_frame[1] + 1
         self._batch = []
         self._close_chunk_first = self._frames_in_chunk >= self._cfg.chunk_max_frames  # bounds a crash's loss
         if self._close_chunk_first:
