@@ -112,9 +112,24 @@ class RansacSettings(Section):
     match_fraction: float = 0.03  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
 
 
+class CorrelativeSettings(Section):
+    """Exhaustive correlative seeding (estimation/correlative.py) at a known or prior scale:
+    every rotation and translation on a coarse grid counted by BEV wall points near a
+    floorplan wall; the best distinct placements are LM-refined and join the RANSAC pool.
+    Minimal samples need the right line correspondences among thousands on a map built
+    from scans; the exhaustive count does not, and costs one FFT correlation per angle."""
+
+    enabled: bool = True  # runs in global rounds (not while confidently tracking), fixed or prior scale only
+    cell: float = 0.25  # m, translation grid (and rasterisation of the BEV points)
+    angle_step_deg: float = 4.0  # rotation grid
+    tolerance: float = 0.3  # m, a point within this of a wall counts (coarse grid: about cell + LM basin)
+    peaks: int = 10  # distinct placements refined and added to the hypotheses
+
+
 class EstimatorSettings(Section):
     scale_mode: ScaleMode = "free"
     solvers: SolverSettings = SolverSettings()
+    correlative: CorrelativeSettings = CorrelativeSettings()
     scoring: ScoringSettings = ScoringSettings()
     refine: RefineSettings = RefineSettings()
     ransac: RansacSettings = RansacSettings()
@@ -208,24 +223,25 @@ class TrackingSettings(Section):
     measurement_angle_deg: float = 2.0
     measurement_log_scale: float = 0.02
     gate_chi2: float = 13.28  # Mahalanobis^2 gate, chi2(4 dof) at 99%
-    # weights = softmax(weight_gain * running score); running score = EMA of fresh scores
-    score_smoothing: float = 0.3  # EMA factor of a fresh score (or unobserved_score on a miss)
-    unobserved_score: float = 0.0  # score a mode gets in a round where nothing matches it
+    # weights = softmax(weight_gain * running score); running score = EMA of fresh scores.
+    # Every decision below compares modes with each other or with the round's best
+    # hypothesis: score levels differ between map styles (0.8+ on clean plans, -0.5..0.45
+    # on maps built from other passes), score differences mean the same everywhere.
+    score_smoothing: float = 0.3  # EMA factor of a fresh score
+    unobserved_penalty: float = 0.5  # a mode nothing matched this round: fresh = running score - this
     weight_gain: float = 15.0
     # births, pruning, merging
-    birth_min_score: float = 0.3  # an unmatched hypothesis starts a mode only above this...
-    birth_ratio: float = 0.8  # ...and above this fraction of the round's best score
+    birth_score_gap: float = 0.15  # an unmatched hypothesis within this of the round's best starts a mode (the best always does)
     prune_weight: float = 0.001
     max_modes: int = 8
     merge_translation: float = 0.3  # m, implied sensor positions closer than this...
     merge_angle_deg: float = 5.0  # ...and headings closer than this...
     merge_log_scale: float = 0.05  # ...and log scales closer than this: one mode
     # status
-    min_score: float = 0.3  # best running score below this: too little evidence
-    confirm_rounds: int = 2  # matches before a mode can be tracked / make things ambiguous
+    confirm_rounds: int = 2  # rounds a mode was found near the top (within birth_score_gap) before it can be tracked
     ambiguity_ratio: float = 0.5  # a second confirmed mode with weight >= this * best: ambiguous
-    lost_score_ratio: float = 0.5  # fresh score below this * running score is a collapse...
-    lost_rounds: int = 2  # ...and this many consecutive collapses of the tracked mode: lost
+    lost_score_gap: float = 0.1  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
+    lost_rounds: int = 3  # ...this many rounds in a row: lost (the rival, if any, takes over)
     confident_rounds: int = 5  # rounds of tracking one mode before confidently_tracking
 
 
@@ -234,14 +250,17 @@ class LocalizerSettings(Section):
     min_wall_points: int = 100  # BEV wall cells needed before the first round
     min_primitives: int = 3  # lines + circles needed before the first round
     # Per-frame consistency monitor: while tracking, each fused frame's wall points are
-    # checked against the tracked alignment; a run of inconsistent frames means the
-    # odometry jumped (or the device was carried away): the map is cleared and the status
-    # becomes lost, which triggers a full global search.
+    # checked against the tracked alignment. A run of frames the map does not explain is
+    # either a part of the building the floorplan lacks (the frames agree with the BEV)
+    # or an odometry jump (the frames contradict the BEV: walls on cells seen as free).
+    # The first only asks the next round for a global search; the second clears the BEV
+    # and reports lost, since everything fused before the jump is misplaced.
     monitor_distance: float = 0.3  # m, a wall point within this of a floorplan wall is consistent
     monitor_min_consistency: float = 0.05  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = 30  # frames with fewer wall points are not judged
     monitor_max_points: int = 400  # wall points checked per frame (subsampled)
-    monitor_frames: int = 4  # consecutive inconsistent frames that declare the track lost
+    monitor_frames: int = 4  # consecutive inconsistent frames before acting
+    monitor_contradiction: float = 0.2  # a frame with this share of its hits on cells the BEV held as free contradicts it
 
 
 class LoggingSettings(Section):

@@ -38,7 +38,9 @@ class Localizer:
         self.frames_fused = 0
         self.last_result = None  # LocalizationResult of the latest round, for logging
         self.last_observation = None  # BevObservation of the latest round, for overlays
-        self._inconsistent_frames = 0
+        self._inconsistent_frames = 0  # consecutive frames the tracked alignment does not explain...
+        self._contradicting_frames = 0  # ...of which contradict the BEV itself
+        self._force_global = False  # the monitor asks the next round for a full global search
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -74,7 +76,8 @@ class Localizer:
         if obs is None or not self._enough_evidence(obs):
             return
         self.last_observation = obs
-        tracked = self.tracker.confidently_tracking
+        tracked = self.tracker.confidently_tracking and not self._force_global
+        self._force_global = False
         iterations = cfg.estimator.ransac.tracking_iterations if tracked else cfg.estimator.ransac.iterations
         try:
             result = localize(
@@ -84,6 +87,7 @@ class Localizer:
                 make_rng(cfg.seed, "ransac", index),
                 warm_start=self.tracker.warm_start(),
                 iterations=iterations,
+                global_search=not tracked,
             )
         except ZflocError:
             return
@@ -95,7 +99,7 @@ class Localizer:
         timings["tracking"] = time.perf_counter() - t0
 
     def _monitor(self) -> None:
-        """Declare the track lost when new frames stop agreeing with the tracked alignment."""
+        """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
         cfg = self.settings.localizer
         points = self.bev.last_wall_hits
         if self.tracker.status != "tracking" or len(points) < cfg.monitor_min_points:
@@ -103,11 +107,19 @@ class Localizer:
         points = points[:: max(1, len(points) // cfg.monitor_max_points)]
         distances = self.floorplan.distance(self.tracker.best.alignment.apply(points))
         consistent = np.mean(distances < cfg.monitor_distance) >= cfg.monitor_min_consistency
-        self._inconsistent_frames = 0 if consistent else self._inconsistent_frames + 1
-        if self._inconsistent_frames >= cfg.monitor_frames:
-            self._inconsistent_frames = 0
+        if consistent:
+            self._inconsistent_frames = self._contradicting_frames = 0
+            return
+        self._inconsistent_frames += 1
+        self._contradicting_frames += self.bev.last_contradiction >= cfg.monitor_contradiction
+        if self._inconsistent_frames < cfg.monitor_frames:
+            return
+        if 2 * self._contradicting_frames >= self._inconsistent_frames:  # the odometry jumped
             self.tracker.declare_lost()
             self.bev.clear_map()
+        else:  # unmapped part of the building: keep the track, search globally next round
+            self._force_global = True
+        self._inconsistent_frames = self._contradicting_frames = 0
 
     def _enough_evidence(self, obs) -> bool:
         cfg = self.settings.localizer

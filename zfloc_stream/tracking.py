@@ -16,8 +16,14 @@ angle uncertainty turns into position uncertainty in proportion to the distance 
 Drift is a random walk in x whose variance grows with frames elapsed and metres travelled.
 
 Weights come from an exponentially smoothed score per mode (fresh score when matched,
-`unobserved_score` when not): w_i = softmax(weight_gain * running_score_i). Deterministic:
-no randomness, ties broken by input order.
+running score - `unobserved_penalty` when not): w_i = softmax(weight_gain * running_score_i).
+
+Decisions are relative, never absolute score levels (those depend on the map's style):
+the round's best hypothesis always starts a mode (so the first round already gives a
+pose), others only within birth_score_gap of it; a mode is confirmed once it was found
+near the top in confirm_rounds rounds; the tracked mode collapses in a round when a rival
+hypothesis beats it by lost_score_gap (or nothing matches it) and is lost after lost_rounds
+collapses in a row. Deterministic: no randomness, ties broken by input order.
 """
 
 from __future__ import annotations
@@ -72,7 +78,7 @@ class Mode:
     running_score: float  # exponentially smoothed score, drives the weight
     weight: float = 0.0  # normalised over modes
     age: int = 1  # rounds since birth (1 in the round it was born)
-    hits: int = 1  # rounds in which a hypothesis matched it
+    hits: int = 1  # rounds in which it was found near the top (within birth_score_gap of the round's best)
     collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
     tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
 
@@ -156,12 +162,11 @@ class HypothesisTracker:
         scores = np.array([float(h.score) for h in hyps])
         meas = [anchored_state(h.alignment, sensor) for h in hyps]
         matched, explained = self._associate(meas)
-        round_is_strong = len(scores) > 0 and scores[0] >= self.settings.min_score
         for mode in self.modes:
-            self._score_mode(mode, matched.get(mode.id), meas, scores, round_is_strong)
+            self._score_mode(mode, matched.get(mode.id), meas, scores)
             mode.age += 1
         for j in range(len(hyps)):
-            if not explained[j] and self._may_birth(scores[j], scores[0]):
+            if not explained[j] and (j == 0 or scores[j] >= scores[0] - self.settings.birth_score_gap):
                 self._birth(meas[j], scores[j], sensor)
         self._merge()
         self._reweight_and_prune()
@@ -234,26 +239,24 @@ class HypothesisTracker:
                 matched[best_id] = j
         return matched, explained
 
-    def _score_mode(self, mode: Mode, j: int | None, meas, scores, round_is_strong: bool) -> None:
+    def _score_mode(self, mode: Mode, j: int | None, meas, scores) -> None:
         s = self.settings
         if j is None:
-            fresh = s.unobserved_score
-            # Unseen while the round found something strong elsewhere: the evidence moved.
-            mode.collapses = mode.collapses + 1 if round_is_strong else mode.collapses
+            fresh = mode.running_score - s.unobserved_penalty
+            # Unseen while the round found something: the evidence moved elsewhere.
+            mode.collapses = mode.collapses + 1 if len(scores) else mode.collapses
         else:
             fresh = float(scores[j])
             z = mode.kf.x.ravel() + self._residual(mode, meas[j])
             mode.kf.update(z.reshape(4, 1), R=self._meas_cov)
             mode.kf.x[2, 0] = wrap_angle(mode.kf.x[2, 0])
             mode.score = fresh
-            mode.hits += 1
-            collapsed = fresh < s.lost_score_ratio * mode.running_score
+            near_top = fresh >= scores[0] - s.birth_score_gap
+            mode.hits += 1 if near_top else 0
+            # scores[0] is another hypothesis whenever j > 0 (each matches one mode)
+            collapsed = j > 0 and scores[0] - fresh > s.lost_score_gap
             mode.collapses = mode.collapses + 1 if collapsed else 0
         mode.running_score = (1.0 - s.score_smoothing) * mode.running_score + s.score_smoothing * fresh
-
-    def _may_birth(self, score: float, best_score: float) -> bool:
-        s = self.settings
-        return score >= s.birth_min_score and score >= s.birth_ratio * best_score
 
     def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray) -> None:
         kf = KalmanFilter(dim_x=4, dim_z=4)
@@ -311,22 +314,27 @@ class HypothesisTracker:
     def _update_status(self) -> None:
         s = self.settings
         tracked = self._mode_by_id(self._tracked_id)
-        if self._tracked_id is not None and (
-            tracked is None or tracked.collapses >= s.lost_rounds or tracked.running_score < s.min_score
-        ):
-            # The mode we were sure of fell apart: report it and drop it, so the next
-            # strong hypothesis (found by the global search the localizer runs) takes over.
-            self.modes = [m for m in self.modes if m.id != self._tracked_id]
-            self._normalise()
+        leader = self.best  # the tracked mode unless an established rival outweighs it
+        overtaken = tracked is not None and leader is not tracked
+        if self._tracked_id is not None and (tracked is None or tracked.collapses >= s.lost_rounds or overtaken):
+            # The mode we were sure of stopped explaining the data while something else
+            # did better: report lost. It leaves the bank only when a rival exists, so a
+            # pose is always reported (the rival's, or the old one's while nothing else).
+            if tracked is not None and len(self.modes) > 1:
+                self.modes = [m for m in self.modes if m.id != self._tracked_id]
+                self._normalise()
+            elif tracked is not None:
+                tracked.collapses = 0
             self._tracked_id, self._was_lost, self._status = None, True, "lost"
             return
-        leader = self.best
         confirmed = [m for m in self.modes if m.hits >= s.confirm_rounds]
         waiting: Status = "lost" if self._was_lost else "initializing"
-        if leader is None or leader.hits < s.confirm_rounds or leader.running_score < s.min_score:
+        if leader is None or leader.hits < s.confirm_rounds:
             self._tracked_id, self._status = None, waiting
         elif any(m is not leader and m.weight >= s.ambiguity_ratio * leader.weight for m in confirmed):
-            self._tracked_id, self._status = None, "ambiguous"
+            # A tracked mode stays the one reported (hysteresis) while a rival is only
+            # as good; before any mode was tracked, nothing is.
+            self._status = "ambiguous"
         else:
             if self._tracked_id != leader.id:
                 leader.tracked_rounds = 0
@@ -343,12 +351,13 @@ class HypothesisTracker:
     def status(self) -> Status:
         """As of the latest round:
 
-        lost         the tracked mode collapsed (fresh score < lost_score_ratio * running
-                     score, or unseen in a strong round, lost_rounds rounds in a row; or its
-                     running score fell below min_score; or it was pruned); it stays lost
-                     until a confirmed mode dominates again
-        initializing no round yet, BEV not ready, or no confirmed mode with running score
-                     >= min_score (never tracked before)
+        lost         the tracked mode collapsed (a rival beat its fresh score by
+                     lost_score_gap, or nothing matched it, lost_rounds rounds in a row;
+                     or a confirmed rival outweighed it; or it was pruned), or the localizer saw the odometry jump; it stays
+                     lost until a confirmed mode dominates again. The best mode's pose is
+                     still reported.
+        initializing no round yet, BEV not ready, or no confirmed mode yet (never tracked
+                     before); the best mode's pose is reported from the first round on
         ambiguous    another confirmed mode has weight >= ambiguity_ratio * best's
         tracking     one confirmed mode dominates
         """
@@ -367,11 +376,17 @@ class HypothesisTracker:
     # --- views ------------------------------------------------------------------------
     @property
     def best(self) -> Mode | None:
-        """The reported mode: the heaviest confirmed mode, else the heaviest mode."""
+        """The reported mode: the tracked mode while no established rival (found near the
+        top in lost_rounds rounds) outweighs it; else the heaviest confirmed mode, else
+        the heaviest mode."""
         if not self.modes:
             return None
         confirmed = [m for m in self.modes if m.hits >= self.settings.confirm_rounds]
-        return max(confirmed or self.modes, key=lambda m: (m.weight, -m.id))
+        heaviest = max(confirmed or self.modes, key=lambda m: (m.weight, -m.id))
+        tracked = self._mode_by_id(self._tracked_id)
+        if tracked is not None and heaviest is not tracked and heaviest.hits < self.settings.lost_rounds:
+            return tracked
+        return heaviest
 
     def alternatives(self) -> list[Mode]:
         """Every live mode except best, heaviest first."""

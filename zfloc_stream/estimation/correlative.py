@@ -14,6 +14,7 @@ reaches on the same points, against which the online RANSAC localizer is measure
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import cv2
@@ -42,19 +43,82 @@ def thin_to_grid(points: np.ndarray, cell: float) -> np.ndarray:
     return points[np.sort(first)]
 
 
-def _near_wall_mask(floorplan, cell: float, tolerance: float, pad: int) -> tuple[np.ndarray, np.ndarray]:
-    """float32 mask (1 near a wall) on a `cell` grid over the floorplan, padded by `pad`
-    cells of zeros on every side; and the world position of its cell (0, 0) centre."""
-    x0, y0, x1, y1 = floorplan.extent
-    cols = int(np.ceil((x1 - x0) / cell))
-    rows = int(np.ceil((y1 - y0) / cell))
-    xs = x0 + (np.arange(cols) + 0.5) * cell
-    ys = y0 + (np.arange(rows) + 0.5) * cell
-    gx, gy = np.meshgrid(xs, ys)
-    near = floorplan.distance(np.column_stack([gx.ravel(), gy.ravel()])).reshape(rows, cols) < tolerance
-    mask = np.zeros((rows + 2 * pad, cols + 2 * pad), dtype=np.float32)
-    mask[pad : pad + rows, pad : pad + cols] = near
-    return mask, np.array([xs[0] - pad * cell, ys[0] - pad * cell])
+_MASKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _near_wall_mask(floorplan, cell: float, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """float32 mask (1 within `tolerance` of a wall) on a `cell` grid over the floorplan and
+    the world position of its cell (0, 0) centre; cached per floorplan object."""
+    key = (float(cell), float(tolerance))
+    try:
+        cached = _MASKS.setdefault(floorplan, {})
+    except TypeError:  # not weak-referenceable: no caching
+        cached = {}
+    if key not in cached:
+        x0, y0, x1, y1 = floorplan.extent
+        cols = int(np.ceil((x1 - x0) / cell))
+        rows = int(np.ceil((y1 - y0) / cell))
+        xs = x0 + (np.arange(cols) + 0.5) * cell
+        ys = y0 + (np.arange(rows) + 0.5) * cell
+        gx, gy = np.meshgrid(xs, ys)
+        near = floorplan.distance(np.column_stack([gx.ravel(), gy.ravel()])).reshape(rows, cols) < tolerance
+        cached[key] = (near.astype(np.float32), np.array([xs[0], ys[0]]))
+    return cached[key]
+
+
+def correlative_models(
+    floorplan,
+    points: np.ndarray,
+    scale: float = 1.0,
+    *,
+    cell: float = 0.1,
+    angle_step_deg: float = 2.0,
+    tolerance: float = 0.15,
+    peaks: int = 8,
+) -> np.ndarray:
+    """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
+    distinct (1 m at the points' centre, or 10 deg)."""
+    pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
+    if len(pts) < 3:
+        return np.zeros((0, 4))
+    centre = pts.mean(axis=0)
+    local = pts - centre
+    radius = float(np.linalg.norm(local, axis=1).max()) + cell
+    half = int(np.ceil(radius / cell)) + 1
+    side = 2 * half  # the template: a square of side cells around the points' centre
+    near, origin = _near_wall_mask(floorplan, cell, tolerance + 0.5 * cell)
+    mask = cv2.copyMakeBorder(near, half, half, half, half, cv2.BORDER_CONSTANT, value=0.0)
+    mask_origin = origin - half * cell
+    per_angle = max(1, peaks)
+    counts, thetas, corners = [], [], []
+    for theta in np.deg2rad(np.arange(0.0, 360.0, angle_step_deg)):
+        c, s = np.cos(theta), np.sin(theta)
+        rot = local @ np.array([[c, s], [-s, c]])  # R(theta) applied to each row
+        ij = np.floor(rot / cell).astype(np.int64) + half
+        template = np.bincount(ij[:, 1] * side + ij[:, 0], minlength=side * side).astype(np.float32).reshape(side, side)
+        score = cv2.matchTemplate(mask, template, cv2.TM_CCORR).ravel()
+        best = np.argpartition(score, -per_angle)[-per_angle:] if len(score) > per_angle else np.arange(len(score))
+        i, j = np.divmod(best, mask.shape[1] - side + 1)
+        counts.append(score[best])
+        thetas.append(np.full(len(best), theta))
+        # template cell (half, half) holds the points' centre at its corner; placed at
+        # (i, j) that corner lies at mask cell (i + half, j + half)'s corner
+        corners.append(mask_origin + (np.column_stack([j, i]) + half - 0.5) * cell)
+    counts, thetas, corners = np.concatenate(counts), np.concatenate(thetas), np.concatenate(corners)
+    c, s = np.cos(thetas), np.sin(thetas)
+    t = corners - np.column_stack([c * centre[0] - s * centre[1], s * centre[0] + c * centre[1]])
+    order = np.lexsort((t[:, 1], t[:, 0], thetas, -np.round(counts)))  # stable, CPU-independent ties
+    chosen: list[int] = []
+    for k in order:  # greedy non-maximum suppression on the centre's image and the angle
+        far = all(
+            np.hypot(*(corners[k] - corners[q])) > 1.0 or abs(wrap_angle(thetas[k] - thetas[q])) > np.deg2rad(10) for q in chosen
+        )
+        if far:
+            chosen.append(int(k))
+            if len(chosen) >= peaks:
+                break
+    chosen = np.array(chosen, dtype=np.int64)
+    return np.column_stack([t[chosen], wrap_angle(thetas[chosen]), np.full(len(chosen), float(scale))])
 
 
 def correlative_search(
@@ -68,42 +132,11 @@ def correlative_search(
     refine_settings: RefineSettings = RefineSettings(),
 ) -> list[CorrelativeMatch]:
     """Ranked distinct rigid alignments of `points` (odometry plane, metres) to the
-    floorplan, best (most matched points) first."""
-    pts = thin_to_grid(points, cell)
-    if len(pts) < 3:
-        raise InputError(f"correlative search needs at least 3 points, got {len(pts)}")
-    centre = pts.mean(axis=0)
-    local = pts - centre
-    radius = float(np.linalg.norm(local, axis=1).max()) + cell
-    pad = int(np.ceil(radius / cell)) + 2
-    mask, mask_origin = _near_wall_mask(floorplan, cell, tolerance + 0.5 * cell, pad)
-    side = 2 * pad - 2  # the template: a square of side cells around the points' centre
-    candidates = []  # (count, theta, tx, ty)
-    for theta in np.deg2rad(np.arange(0.0, 360.0, angle_step_deg)):
-        c, s = np.cos(theta), np.sin(theta)
-        rot = local @ np.array([[c, s], [-s, c]])  # R(theta) applied to each row
-        ij = np.floor(rot / cell).astype(np.int64) + side // 2
-        template = np.zeros((side, side), dtype=np.float32)
-        np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
-        score = cv2.matchTemplate(mask, template, cv2.TM_CCORR)
-        # keep this rotation's best few placements (distinct enough by a coarse grid)
-        flat = np.argpartition(score.ravel(), -peaks)[-peaks:]
-        for f in flat:
-            i, j = divmod(int(f), score.shape[1])
-            # template cell (side//2, side//2) holds the centre's cell: its corner maps to
-            # mask cell (i + side//2, j + side//2), whose centre is mask_origin + (j, i) * cell
-            corner = mask_origin + (np.array([j, i]) + side // 2 - 0.5) * cell
-            t = corner - np.array([c * centre[0] - s * centre[1], s * centre[0] + c * centre[1]])
-            candidates.append((float(score.ravel()[f]), float(wrap_angle(theta)), t[0], t[1]))
-    candidates.sort(key=lambda row: (-row[0], row[1], row[2], row[3]))
-    chosen: list[tuple] = []
-    for row in candidates:  # greedy non-maximum suppression on (centre position, angle)
-        p = _apply(row, centre)
-        if all(np.hypot(*(p - _apply(k, centre))) > 1.0 or abs(wrap_angle(row[1] - k[1])) > np.deg2rad(10) for k in chosen):
-            chosen.append(row)
-        if len(chosen) >= peaks:
-            break
-    models = np.array([[tx, ty, th, 1.0] for _, th, tx, ty in chosen])
+    floorplan, best (most matched points after LM refinement) first."""
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(thin_to_grid(points, cell)) < 3:
+        raise InputError(f"correlative search needs at least 3 points, got {len(points)}")
+    models = correlative_models(floorplan, points, cell=cell, angle_step_deg=angle_step_deg, tolerance=tolerance, peaks=peaks)
     refined = refine_batch(floorplan, points, models, refine_settings, "fixed")
     thinned = thin_to_grid(points, 0.5 * cell)
     matches = []
@@ -113,9 +146,3 @@ def correlative_search(
         matches.append(CorrelativeMatch(alignment, matched, len(thinned)))
     matches.sort(key=lambda m: -m.matched)
     return matches
-
-
-def _apply(row, centre: np.ndarray) -> np.ndarray:
-    _, theta, tx, ty = row
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([c * centre[0] - s * centre[1] + tx, s * centre[0] + c * centre[1] + ty])

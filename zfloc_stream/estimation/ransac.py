@@ -51,11 +51,13 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2
+from .correlative import correlative_models
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
+CORRELATIVE = "correlative"
 
 
 @dataclass(frozen=True)
@@ -441,6 +443,20 @@ def solver_pool(cfg: EstimatorSettings, bev: BevSamples, fp: FloorplanMatches) -
 # --------------------------------------------------------------------------------------
 
 
+def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, scale_prior: float) -> np.ndarray:
+    """Exhaustive grid placements at the prior (or fixed) scale, LM-refined on the
+    wall-face field so they enter the ranking as sharp as the refined RANSAC models."""
+    c = cfg.correlative
+    scale = 1.0 if cfg.scale_mode == "fixed" else scale_prior
+    models = correlative_models(
+        floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance, peaks=c.peaks
+    )
+    if len(models) == 0:
+        return np.zeros((0, 4))
+    field = floorplan_scorer(floorplan, cfg.scoring).face_field
+    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
+
+
 def _validate(obs, scale_prior: float, iterations: int) -> None:
     if not isinstance(obs, BevObservation):
         raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
@@ -461,8 +477,13 @@ def localize(
     scale_prior: float = 1.0,
     warm_start: Sequence[Sim2] = (),
     iterations: int | None = None,
+    global_search: bool = True,
 ) -> LocalizationResult:
-    """Align the BEV observation to the floorplan; hypotheses ranked best first."""
+    """Align the BEV observation to the floorplan; hypotheses ranked best first.
+
+    global_search: also seed with the exhaustive correlative search (fixed or prior
+    scale, estimator.correlative.enabled); a round that only follows a tracked mode
+    passes False."""
     cfg = settings
     iterations = cfg.ransac.iterations if iterations is None else int(iterations)
     _validate(obs, scale_prior, iterations)
@@ -493,6 +514,10 @@ def localize(
     if warm:
         blocks.append(np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm]))
         labels += [WARM] * len(warm)
+    if global_search and cfg.correlative.enabled and cfg.scale_mode != "free":
+        seeds = _correlative_seeds(floorplan, obs, cfg, scale_prior)
+        blocks.append(seeds)
+        labels += [CORRELATIVE] * len(seeds)
     models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
     labels_arr = np.array(labels, dtype=object)
     t1 = time.perf_counter()
