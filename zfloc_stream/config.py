@@ -77,6 +77,7 @@ class SolverSettings(Section):
     scale_prior_window: float = 0.1
     min_scale: float = 0.5  # models outside [min_scale, max_scale] are discarded
     max_scale: float = 2.0
+    prior_range: float = 0.15  # prior mode: scales outside prior * [1 / (1 + r), 1 + r] are discarded too (depth cameras and VIO: a few %; monocular depth networks: ~10 %)
     parallel_angle_deg: float = 10.0  # lines closer than this in direction count as parallel (degenerate)
     min_baseline: float = 0.3  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
     singular_tolerance: float = 1e-9  # relative determinant below which a linear solve is degenerate
@@ -127,7 +128,11 @@ class CorrelativeSettings(Section):
 
 
 class EstimatorSettings(Section):
-    scale_mode: ScaleMode = "free"
+    # prior: metric input (depth camera, VIO, depth network) known to about prior_range;
+    # fixed: exactly metric (a laser; sources that know set it); free: any scale in
+    # [min_scale, max_scale] (the paper's setting, on request).
+    scale_mode: ScaleMode = "prior"
+    scale_prior: float = 1.0  # expected BEV -> floorplan scale in prior mode (1 = both metric)
     solvers: SolverSettings = SolverSettings()
     correlative: CorrelativeSettings = CorrelativeSettings()
     scoring: ScoringSettings = ScoringSettings()

@@ -85,6 +85,7 @@ class Localizer:
                 obs,
                 cfg.estimator,
                 make_rng(cfg.seed, "ransac", index),
+                scale_prior=cfg.estimator.scale_prior,
                 warm_start=self.tracker.warm_start(),
                 iterations=iterations,
                 global_search=not tracked,

@@ -487,6 +487,10 @@ def localize(
     cfg = settings
     iterations = cfg.ransac.iterations if iterations is None else int(iterations)
     _validate(obs, scale_prior, iterations)
+    if cfg.scale_mode == "prior":  # the prior bounds every solver, the refinement and the seeds
+        lo, hi = scale_prior / (1.0 + cfg.solvers.prior_range), scale_prior * (1.0 + cfg.solvers.prior_range)
+        bounded = {"min_scale": max(cfg.solvers.min_scale, lo), "max_scale": min(cfg.solvers.max_scale, hi)}
+        cfg = cfg.model_copy(update={"solvers": cfg.solvers.model_copy(update=bounded)})
     t0 = time.perf_counter()
 
     # ---- model estimation ------------------------------------------------------------

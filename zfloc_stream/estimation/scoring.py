@@ -70,6 +70,9 @@ def _chunks(n_models: int, n_points: int, chunk_size: int):
 # --------------------------------------------------------------------------------------
 
 
+MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
+
+
 @dataclass(frozen=True)
 class FaceField:
     """Distance to the nearest wall surface seen from inside the building, i.e. to a FACE
@@ -100,7 +103,10 @@ class FaceField:
         labels, _ = ndimage.label(free)
         border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
         inside = free & ~np.isin(labels, border[border > 0])
-        seen_from = inside if inside.any() else free  # an open plan: every face counts
+        # An open plan, or a map built from scans (its interior leaks into the unknown
+        # around it through doorways and gaps, so only small pockets look enclosed):
+        # every face counts. MIN_INSIDE_SHARE is a ratio of areas, not a tuned distance.
+        seen_from = inside if inside.sum() >= MIN_INSIDE_SHARE * free.sum() else free
         faces = occupied & ndimage.binary_dilation(seen_from)
         if not faces.any():
             return cls(np.asarray(floorplan.distance_field), origin, res)
