@@ -318,6 +318,7 @@ class VectorFloorplanSettings(Section):
 
     resolution: float = 0.05  # m per raster cell
     wall_thickness: float = 0.1  # m, a wall drawn as a line is rasterised this thick
+    solid_max_width: float = 0.6  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
     margin: float = 1.0  # m of free border around the drawing
     max_cells: int = 25000000  # larger rasters are refused (a wrong unit scale, usually)
 
