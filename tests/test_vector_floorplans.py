@@ -199,3 +199,27 @@ def test_bad_vector_plans_are_one_line_errors_naming_the_file(tmp_path, capsys):
         code = main(["demo", "--floorplan", str(svg), "--frames", "2", "--out", str(tmp_path / "o"), "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "plan.svg" in err
+
+
+def test_demo_walks_through_a_users_dxf_plan(tmp_path, apartment, capsys):
+    plan = write_dxf(apartment, tmp_path / "my-flat.dxf")
+    out = tmp_path / "demo"
+    code = main(["demo", "--floorplan", str(plan), "--skip-layers", "FURNITURE", "--frames", "25", "--out", str(out), "--no-progress"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "demo my-flat: 25 frames" not in text  # the title goes to the overlay; the summary lines below
+    assert "success@1m: yes" in text, text
+    assert (out / "trajectory.tum").read_text().count("\n") > 10
+    session = read_session(out / "session.mcap")
+    assert "floorplan.dxf" in session.floorplan_files  # the user's drawing travels with the run
+
+
+def test_scene_from_a_floorplan_extrudes_exactly_its_raster(apartment):
+    from zfloc_stream.sim import build_scene_from_floorplan
+    from zfloc_stream.sim.layout import rasterize_boxes
+
+    scene = build_scene_from_floorplan(apartment.floorplan, seed=0)
+    redrawn = rasterize_boxes(scene.grid, *wall_boxes(scene.walls, scene.wall_thickness))
+    np.testing.assert_array_equal(redrawn, apartment.floorplan.occupied)
+    assert scene.floorplan is apartment.floorplan and len(scene.rooms) >= 2
+    assert abs(scene.floor_area - apartment.floor_area) < 0.05 * apartment.floor_area
