@@ -140,3 +140,30 @@ def test_bags_without_what_frames_need_are_one_line_errors(tmp_path, capsys, las
     code = main(["run", "--input", str(bad), "--topic", "scan", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2 and "--topic 'scan' must look like ROLE=/topic" in err
+
+
+def test_protobuf_session_with_odometry_at_its_own_rate_localizes(tmp_path, apartment, laser_run):
+    """Our own MCAP topics, but /odometry at 50 Hz on its own stamps and /scan at 15 Hz (as
+    another tool would record them): frames get the interpolated pose, nothing is dropped."""
+    from mcap_protobuf.writer import Writer
+
+    from ros2_bag import base_poses_at
+    from zfloc_stream.session import read_session
+    from zfloc_stream.session import schemas as S
+
+    frame_ns = [int(round((50.0 + k / 15) * 1e9)) for k in range(len(laser_run.frames))]
+    odom_ns = [int(round((49.9 + 0.003 + j / 50) * 1e9)) for j in range(int((len(frame_ns) / 15 + 0.2) * 50))]
+    poses = base_poses_at(odom_ns, frame_ns, [f.T_odom_sensor for f in laser_run.frames], np.eye(4))
+    events = [(ns, S.TOPIC_ODOMETRY, S.pose_to_msg(T, ns, "odom")) for ns, T in zip(odom_ns, poses)]
+    events += [(ns, S.TOPIC_SCAN, S.scan_to_msg(f.ranges, f.angle_min, f.angle_increment, ns)) for ns, f in zip(frame_ns, laser_run.frames)]
+    with open(tmp_path / "rates.mcap", "wb") as f:
+        writer = Writer(f)
+        for ns, topic, msg in sorted(events, key=lambda e: e[0]):
+            writer.write_message(topic, msg, log_time=ns, publish_time=ns)
+        writer.finish()
+    session = read_session(tmp_path / "rates.mcap")
+    frames = list(session.frames())
+    assert len(frames) == len(laser_run.frames) and session.problems == []
+    seq = detect_source(tmp_path / "rates.mcap", floorplan=apartment.floorplan)
+    errors, _ = _localize(seq, apartment.floorplan, laser_run.poses)
+    assert is_success(errors, 1.0) and np.nanmax(errors[-10:]) < 0.2
