@@ -81,8 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser(
         "run",
         help="localize recorded inputs against a floorplan",
-        description="Localize a recorded session (MCAP, Gibson(t) scene folder or Carmen log, detected by content) "
-        "against a floorplan. Writes trajectory.csv, overlay.png and session.mcap.",
+        description="Localize a recorded session (MCAP session, ROS 2 bag, Gibson(t) scene folder or Carmen log, detected by content) "
+        "against a floorplan. Writes trajectory.csv, trajectory.tum, overlay.png and session.mcap.",
         epilog="examples:\n  zfloc-stream run --floorplan map.yaml --input session.mcap --out out/\n"
         "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/",
         formatter_class=argparse.RawDescriptionHelpFormatter,
