@@ -223,3 +223,25 @@ def test_scene_from_a_floorplan_extrudes_exactly_its_raster(apartment):
     np.testing.assert_array_equal(redrawn, apartment.floorplan.occupied)
     assert scene.floorplan is apartment.floorplan and len(scene.rooms) >= 2
     assert abs(scene.floor_area - apartment.floor_area) < 0.05 * apartment.floor_area
+
+
+def test_every_entity_kind_becomes_wall(tmp_path):
+    doc = ezdxf.new(units=5)  # centimetres
+    msp = doc.modelspace()
+    msp.add_line((0, 0), (800, 0))
+    msp.add_polyline2d([(800, 0), (800, 600), (0, 600)])
+    msp.add_lwpolyline([(0, 600), (0, 0)])
+    msp.add_arc((400, 600), 100, 180, 360)  # a bay under the top wall: raster only, it is not straight
+    msp.add_lwpolyline([(300, 200), (500, 200)], format="xy")
+    doc.saveas(tmp_path / "mix.dxf")
+    plan = load_vector_floorplan(tmp_path / "mix.dxf")
+    ends = sorted(tuple(np.round(np.sort(e, axis=0).ravel(), 6)) for e in plan.lines.endpoints)
+    assert ends == [(0, 0, 0, 6), (0, 0, 8, 0), (0, 6, 8, 6), (3, 2, 5, 2), (8, 0, 8, 6)]
+    assert plan.distance(np.array([[4.0, 5.0], [4.0 + np.sqrt(0.5), 6 - np.sqrt(0.5)]])).max() < RES
+    svg = tmp_path / "mix.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><rect x="0" y="-600" width="800" height="600" fill="none"/>'
+                   '<path d="M 100 -100 L 300 -100 A 100 100 0 0 1 500 -100"/><line x1="600" y1="-500" x2="600" y2="-300"/>'
+                   '<circle cx="700" cy="-100" r="25"/><polyline points="100,-500 200,-500 200,-400"/></svg>')
+    plan = load_vector_floorplan(svg, scale=0.01)
+    assert len(plan.lines) == 8 and np.allclose(plan.circles.centers, [[7.0, 1.0]]) and np.allclose(plan.circles.radii, [0.25])
+    assert plan.distance(np.array([[4.0, 2.0]])).max() < RES  # the arc's top

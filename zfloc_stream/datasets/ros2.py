@@ -148,6 +148,10 @@ class _Motion:
 
     def sensor_track(self, path: Path) -> tuple[PoseTrack, np.ndarray]:
         """(track of T_odom_base, T_base_sensor) for the sensor frame."""
+        if not self.sensor_frame:  # no frame_id on the sensor: take it as mounted at the odometry's body
+            warnings.warn(f"{path}: the sensor messages carry no frame_id: taking the sensor as the odometry's body frame", stacklevel=3)
+            if self.odometry is not None:
+                return self.odometry, np.eye(4)
         chain = self.static_chain(self.sensor_frame)
         if self.odometry is not None:
             child = self.odom_child or chain[-1][0]  # an empty child_frame_id: the chain's root
@@ -251,8 +255,12 @@ class Ros2Bag:
                             m.dynamic[child][1].add(_stamp_ns(tr.header), T)
             except SessionLogError as err:  # a transform that is not a rotation
                 raise InputError(f"{self.path}: {self.topics[role]}: {err}") from None
-        if self.kind == "depth" and m.camera_info is None:
-            raise InputError(f"{self.path}: no CameraInfo message on {self.topics['camera_info']}")
+        if self.kind == "depth":
+            if m.camera_info is None:
+                raise InputError(f"{self.path}: no CameraInfo message on {self.topics['camera_info']}")
+            K = m.camera_info[0]
+            if not (np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1])):
+                raise InputError(f"{self.path}: {self.topics['camera_info']}: K {K.ravel().tolist()} is not a camera calibration (uncalibrated camera?)")
         return m
 
     # --- frames ------------------------------------------------------------------------------
