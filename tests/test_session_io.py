@@ -14,6 +14,7 @@ from session_helpers import camera_frames, fake_estimate, laser_frames, write_fa
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.frames import CameraFrame
+from zfloc_stream.pose_interpolation import interpolate_pose
 from zfloc_stream.session import SessionWriter, read_session
 from zfloc_stream.session import schemas as S
 
@@ -169,14 +170,18 @@ def _foreign_file(path, frames, drop_odometry_of=(), calibration_once=True):
 
 def test_foreign_file_grouping_and_dropped_frames(tmp_path):
     frames = camera_frames(6, seed=5, labels=False)
-    _foreign_file(tmp_path / "f.mcap", frames, drop_odometry_of=(2,))
+    _foreign_file(tmp_path / "f.mcap", frames, drop_odometry_of=(2, 5))
     session = read_session(tmp_path / "f.mcap")
     got = list(session.records())
+    # frame 2 has no odometry of its own stamp: its pose is interpolated between frames 1 and 3
+    # (odometry at its own rate); frame 5 lies after the last odometry message: dropped, with why
     assert [r.index for r in got] == [0, 1, 2, 3, 4]
-    assert [r.frame.timestamp for r in got] == pytest.approx([frames[i].timestamp for i in (0, 1, 3, 4, 5)])
+    assert [r.frame.timestamp for r in got] == pytest.approx([frames[i].timestamp for i in range(5)])
     assert all(np.array_equal(r.frame.K, frames[0].K) and r.frame.labels is None for r in got)
-    assert np.allclose(got[2].frame.ground_truth, frames[3].ground_truth)
-    assert len(session.problems) == 1 and "no /odometry" in session.problems[0]
+    assert np.allclose(got[3].frame.ground_truth, frames[3].ground_truth)
+    expected = interpolate_pose(frames[1].T_odom_cam, frames[3].T_odom_cam, 0.5)
+    np.testing.assert_allclose(got[2].frame.T_odom_cam, expected, atol=1e-9)
+    assert len(session.problems) == 1 and "no /odometry pose" in session.problems[0] and "outside" in session.problems[0]
 
 
 def test_errors_name_the_file_and_fault(tmp_path):

@@ -335,7 +335,26 @@ class SimDatasetSettings(Section):
     scene_seed: int = 0  # building layout (the walk and noise follow settings.seed)
 
 
+class Ros2Settings(Section):
+    """ROS 2 bags (rosbag2 MCAP, CDR messages) and sensors at their own rates (issue 13)."""
+
+    max_odometry_gap: float = 0.5  # s, a frame between two odometry/tf messages further apart than this is skipped
+
+
+class VectorFloorplanSettings(Section):
+    """DXF / SVG / GeoJSON floorplans: lines and circles come from the vectors; the
+    occupancy raster (distance field, Cv) is drawn from them at this resolution."""
+
+    resolution: float = 0.05  # m per raster cell
+    wall_thickness: float = 0.1  # m, a wall drawn as a line is rasterised this thick
+    solid_max_width: float = 0.6  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
+    margin: float = 1.0  # m of free border around the drawing
+    max_cells: int = 25000000  # larger rasters are refused (a wrong unit scale, usually)
+
+
 class DatasetSettings(Section):
+    ros2: Ros2Settings = Ros2Settings()
+    vector_floorplan: VectorFloorplanSettings = VectorFloorplanSettings()
     odometry: OdometrySettings = OdometrySettings()
     gibson: GibsonSettings = GibsonSettings()
     carmen: CarmenSettings = CarmenSettings()

@@ -144,6 +144,10 @@ class Floorplan:
         if gibson:
             return cls.from_gibson_map(path, settings)
         suffix = path.suffix.lower()
+        if suffix in (".dxf", ".svg", ".geojson", ".json"):  # vector drawings (vector_floorplan.py)
+            from .vector_floorplan import load_vector_floorplan
+
+            return load_vector_floorplan(path, settings)
         if suffix in (".yaml", ".yml"):
             if resolution is not None or origin is not None:
                 raise FloorplanError(f"{path}: resolution and origin come from the YAML file; do not pass them")
@@ -168,6 +172,10 @@ class Floorplan:
             meta = yaml.safe_load(path.read_text())
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
             raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
+        if isinstance(meta, dict) and "vector" in meta:  # a vector plan (as written into sessions)
+            from .vector_floorplan import load_vector_yaml
+
+            return load_vector_yaml(path, meta, settings)
         if not isinstance(meta, dict):
             raise FloorplanError(f"{path}: a ROS map YAML must be a mapping with keys {', '.join(ROS_KEYS)}")
         missing = [k for k in ROS_KEYS if k not in meta]

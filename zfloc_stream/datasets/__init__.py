@@ -4,6 +4,7 @@
     open_dataset("gibson:/data/gibson_t:test")      Gibson(t) (F3Loc release), a split or one scene
     open_dataset("carmen:/data/intel.log.gz")       Carmen laser log(s)
     open_dataset("mcap:/runs/session.mcap")         recorded MCAP session(s)
+    open_dataset("ros2:/bags/run1.mcap")            ROS 2 bag(s) (rosbag2 MCAP)
 
 Each returns a list of Sequence (base.py). `detect_source(path)` picks the loader by the
 file's content for `zfloc-stream run --input`.
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from ..config import Settings
 from ..errors import InputError
-from . import carmen, gibson, mcap, sim  # noqa: F401 (registers the loaders)
+from . import carmen, gibson, mcap, ros2, sim  # noqa: F401 (registers the loaders)
 from .base import Sequence, known_kinds, open_dataset, register, synthetic_odometry
 
 MCAP_MAGIC = b"\x89MCAP"
@@ -44,11 +45,13 @@ def detect_source(
     odometry_noise: float | None = None,
     seed: int | None = None,
     settings: Settings | None = None,
+    topics: dict[str, str] | None = None,
 ) -> Sequence:
     """One Sequence from a path, recognised by content: an MCAP session (magic bytes), a
     Gibson(t) scene folder (map.png + poses.txt + depth40.txt), or a Carmen log, plain or
     gzipped (FLASER / ROBOTLASER1 lines). odometry_noise: synthetic drift fraction for
-    sources whose poses are ground truth (None: settings.datasets.odometry.noise)."""
+    sources whose poses are ground truth (None: settings.datasets.odometry.noise). An MCAP
+    file with ROS 2 (CDR) channels is read as a ROS 2 bag; topics: its role -> topic overrides."""
     settings = settings if settings is not None else Settings()
     if seed is not None:
         settings = settings.model_copy(update={"seed": int(seed)})
@@ -60,6 +63,10 @@ def detect_source(
             return gibson.scene_sequence(path, settings, floorplan=floorplan, odometry_noise=odometry_noise)
         raise InputError(f"{path} is a folder but not a Gibson(t) scene (needs {', '.join(gibson.SCENE_FILES)})")
     head = _head(path)
+    if head.startswith(MCAP_MAGIC) and ros2.is_ros2_mcap(path):
+        return ros2.bag_sequence(path, settings, floorplan=floorplan, topics=topics)
+    if topics:
+        raise InputError(f"--topic applies to ROS 2 bags only; {path} is not one")
     if head.startswith(MCAP_MAGIC):
         return mcap.session_sequence(path, settings, floorplan=floorplan)
     if carmen.looks_like_carmen(head):

@@ -6,7 +6,8 @@
 
 Frames are grouped by the timestamp in each message's header (log time where a header
 has none): one /camera/depth (or /scan) message plus the /odometry message of the same
-timestamp make a frame; /camera/labels and /groundtruth/pose of that timestamp are added
+timestamp make a frame (odometry at its own rate and stamps is interpolated at the
+frame's timestamp instead: pose_interpolation.py); /camera/labels and /groundtruth/pose of that timestamp are added
 when present; the calibration is the latest one at or before it. A frame is complete once
 every input topic has moved past its timestamp, so only a few frames are ever buffered.
 Files from other tools on the same topics read the same way.
@@ -34,6 +35,7 @@ from ..config import Settings, settings_from_dict
 from ..errors import FrameError, SessionLogError, ZflocError
 from ..estimate import Estimate
 from ..frames import CameraFrame, LaserFrame
+from ..pose_interpolation import PoseTrack
 from . import schemas as S
 from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
 
@@ -181,7 +183,7 @@ class Session:
         grouper = _FrameGrouper(self)
         index = 0
         for stamp, parts in grouper.stamps(self._messages()):
-            rec = self._record(index, stamp, parts)
+            rec = self._record(index, stamp, parts, grouper.odometry)
             if rec is None:
                 continue
             if index >= start:
@@ -190,7 +192,7 @@ class Session:
                 yield rec
             index += 1
 
-    def _record(self, index: int, stamp: int, parts: dict) -> FrameRecord | None:
+    def _record(self, index: int, stamp: int, parts: dict, odometry: PoseTrack | None = None) -> FrameRecord | None:
         outputs = LoggedOutputs(
             status=parts.get(S.TOPIC_STATUS, (None,))[0],
             pose=parts.get(S.TOPIC_POSE, (None,))[0],
@@ -200,13 +202,16 @@ class Session:
         where = f"t={S.ns_to_seconds(stamp):.9f}"
         has_camera, has_scan = S.TOPIC_DEPTH in parts, S.TOPIC_SCAN in parts
         if not (has_camera or has_scan):
-            orphans = sorted(t for t in parts if t != S.TOPIC_CALIBRATION)
+            orphans = sorted(t for t in parts if t not in (S.TOPIC_CALIBRATION, S.TOPIC_ODOMETRY))  # odometry may run at its own rate
             if orphans:
                 self.problems.append(f"{where}: {', '.join(orphans)} without a {S.TOPIC_DEPTH} or {S.TOPIC_SCAN} message of the same timestamp dropped")
             return None
-        if S.TOPIC_ODOMETRY not in parts:
-            self.problems.append(f"{where}: frame dropped: no {S.TOPIC_ODOMETRY} message with the same timestamp")
-            return None
+        if S.TOPIC_ODOMETRY not in parts:  # odometry at its own rate: the pose interpolated at this stamp
+            T, reason = (None, f"no {S.TOPIC_ODOMETRY} message") if odometry is None else odometry.at(stamp)
+            if T is None:
+                self.problems.append(f"{where}: frame dropped: no {S.TOPIC_ODOMETRY} pose ({reason})")
+                return None
+            parts[S.TOPIC_ODOMETRY] = (S.pose_to_msg(T, stamp, S.FRAME_ODOM), {})
         odom, odom_meta = parts[S.TOPIC_ODOMETRY]
         gt, gt_meta = parts.get(S.TOPIC_GROUND_TRUTH, (None, {}))
         try:
@@ -316,12 +321,19 @@ class _FrameGrouper:
         self.progress: dict[str, int] = {}
         self.calibrations: list[tuple[int, object]] = []  # (stamp, message), in file order
         self.released_up_to = -1
+        gap = (session.settings or Settings()).datasets.ros2.max_odometry_gap
+        self.odometry = PoseTrack(S.TOPIC_ODOMETRY, gap)  # every odometry pose, for frames between its stamps
 
     def stamps(self, messages) -> Iterator[tuple[int, dict]]:
         for topic, stamp, msg, meta in messages:
             if topic == S.TOPIC_CALIBRATION:
                 self.calibrations.append((stamp, msg))
                 continue
+            if topic == S.TOPIC_ODOMETRY:
+                try:
+                    self.odometry.add(stamp, S.matrix_from_pose(msg.pose))
+                except SessionLogError:
+                    pass  # a broken pose: reported when a frame of that stamp is assembled
             if stamp <= self.released_up_to:
                 self.session.problems.append(f"{topic} message at t={S.ns_to_seconds(stamp):.9f} arrived after its frame and was dropped")
                 continue
@@ -343,6 +355,7 @@ class _FrameGrouper:
                 break
             parts = self.pending.pop(stamp)
             self.released_up_to = stamp
+            self.odometry.drop_before(stamp)  # later frames have later stamps
             calib = self._calibration_at(stamp)
             if calib is not None:
                 parts[S.TOPIC_CALIBRATION] = (calib, {})

@@ -14,6 +14,9 @@ EPILOG = """examples:
   zfloc-stream demo --scene office --seed 3 --out /tmp/office
   zfloc-stream run --floorplan map.yaml --input session.mcap --out out/
   zfloc-stream run --floorplan map.yaml --input intel.log.gz --odometry-noise 0.02 --out out/
+  zfloc-stream run --floorplan plan.dxf --input robot.mcap --topic scan=/front/scan --out out/   # a ROS 2 bag
+  zfloc-stream demo --floorplan plan.dxf              # a simulated walk through your own building
+  zfloc-stream export out/session.mcap --tum out.txt  # the logged trajectory for evo
   zfloc-stream map-from-log intel.log.gz --exclude 375:454 --out held-out-map/
   zfloc-stream config > my.yaml                       # the default settings, to edit
 """
@@ -23,6 +26,29 @@ def _add_settings_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, help="YAML settings file (overrides the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override one setting, e.g. estimator.ransac.iterations=300")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_floorplan_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scale", type=float, metavar="M_PER_UNIT", help="vector plans: metres per drawing unit (SVG: required; DXF: overrides the header's units)")
+    p.add_argument("--layers", help="DXF plans: comma-separated layers to use (default all)")
+    p.add_argument("--skip-layers", help="DXF plans: comma-separated layers to leave out (furniture, text, ...)")
+    p.add_argument("--tum", type=Path, metavar="PATH", help="also write the trajectory as a TUM file for evo (default OUT/trajectory.tum)")
+
+
+def _split(text: str | None) -> list[str] | None:
+    return None if not text else [t.strip() for t in text.split(",") if t.strip()]
+
+
+def load_floorplan(args, settings):
+    """The --floorplan of a command: a ROS map YAML, an image, or a DXF/SVG/GeoJSON drawing."""
+    from ..floorplan import Floorplan
+    from ..vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan
+
+    if args.floorplan.suffix.lower() in VECTOR_SUFFIXES:
+        return load_vector_floorplan(args.floorplan, settings, scale=args.scale, layers=_split(args.layers), skip_layers=_split(args.skip_layers))
+    if args.scale is not None or args.layers or args.skip_layers:
+        raise ZflocError(f"--scale, --layers and --skip-layers apply to DXF/SVG/GeoJSON floorplans, not {args.floorplan.name}")
+    return Floorplan.load(args.floorplan, resolution=getattr(args, "resolution", None), origin=getattr(args, "origin", None), settings=settings)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,32 +66,49 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate a camera walking through a built-in scene and localize it online. Writes "
         "trajectory.csv, overlay.png and session.mcap; prints the final error and success (all of the last "
         "10 frames within 1 m).",
-        epilog="examples:\n  zfloc-stream demo\n  zfloc-stream demo --scene symmetric --frames 60 --out /tmp/sym",
+        epilog="examples:\n  zfloc-stream demo\n  zfloc-stream demo --scene symmetric --frames 60 --out /tmp/sym\n"
+        "  zfloc-stream demo --floorplan plan.dxf --skip-layers FURNITURE,TEXT\n  zfloc-stream demo --floorplan plan.svg --scale 0.01",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     demo.add_argument("--scene", default="apartment", help="built-in scene: rooms, apartment, office, symmetric, hall (default apartment)")
+    demo.add_argument("--floorplan", type=Path, help="walk through your own plan instead (ROS map YAML, DXF, SVG, GeoJSON)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene, the walk and the localizer (default 0)")
     demo.add_argument("--frames", type=int, default=100, help="number of frames (default 100)")
     demo.add_argument("--out", type=Path, default=Path("zfloc-demo"), help="output folder (default ./zfloc-demo)")
+    _add_floorplan_options(demo)
     _add_settings_args(demo)
 
     run = sub.add_parser(
         "run",
         help="localize recorded inputs against a floorplan",
-        description="Localize a recorded session (MCAP, Gibson(t) scene folder or Carmen log, detected by content) "
-        "against a floorplan. Writes trajectory.csv, overlay.png and session.mcap.",
+        description="Localize a recorded session (MCAP session, ROS 2 bag, Gibson(t) scene folder or Carmen log, detected by content) "
+        "against a floorplan. Writes trajectory.csv, trajectory.tum, overlay.png and session.mcap.",
         epilog="examples:\n  zfloc-stream run --floorplan map.yaml --input session.mcap --out out/\n"
         "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    run.add_argument("--floorplan", type=Path, help="ROS map_server YAML, or an image with --resolution and --origin "
-                     "(optional for MCAP sessions that carry their floorplan)")
+    run.add_argument("--floorplan", type=Path, help="ROS map_server YAML, an image with --resolution and --origin, or a "
+                     "DXF/SVG/GeoJSON drawing (optional for MCAP sessions that carry their floorplan)")
     run.add_argument("--resolution", type=float, help="metres per pixel of an image floorplan")
     run.add_argument("--origin", type=float, nargs=2, metavar=("X", "Y"), help="metric position of the image's lower-left corner")
-    run.add_argument("--input", type=Path, required=True, help="session.mcap, a Gibson(t) scene folder, or a Carmen log")
+    run.add_argument("--input", type=Path, required=True, help="session.mcap, a ROS 2 bag (.mcap), a Gibson(t) scene folder, or a Carmen log")
+    run.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
+                     help="ROS 2 bags: the topic for a role (scan, depth, camera_info, odom, tf, tf_static), e.g. scan=/front/scan")
     run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
     run.add_argument("--out", type=Path, default=Path("zfloc-run"), help="output folder (default ./zfloc-run)")
+    _add_floorplan_options(run)
     _add_settings_args(run)
+
+    export = sub.add_parser(
+        "export",
+        help="write the trajectory logged in a session file as TUM (for evo)",
+        description="Write the estimates logged in a session.mcap (/zfloc/status) as a TUM trajectory "
+        "(timestamp tx ty tz qx qy qz qw), readable by evo_traj / evo_ape.",
+        epilog="examples:\n  zfloc-stream export out/session.mcap --tum out.txt\n  evo_traj tum out.txt --plot",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    export.add_argument("session", type=Path, help="a session.mcap written by zfloc-stream run/demo or zfloc-replay")
+    export.add_argument("--tum", type=Path, required=True, metavar="PATH", help="TUM file to write")
 
     config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
     config.add_argument("--config", type=Path, help="YAML settings file")
@@ -88,11 +131,16 @@ def cmd_demo(args) -> int:
     settings = load_settings(args.config, args.set, base_overrides={"seed": args.seed})
     if args.frames < 1:
         raise ZflocError("--frames must be at least 1")
-    scene = build_scene(args.scene, seed=args.seed)
+    if args.floorplan is not None:
+        from ..sim import build_scene_from_floorplan
+
+        scene = build_scene_from_floorplan(load_floorplan(args, settings), seed=args.seed)
+    else:
+        scene = build_scene(args.scene, seed=args.seed)
     sequence = simulate(scene, SimSettings(), seed=args.seed, n_frames=args.frames)
     outcome = run_session(
         scene.floorplan, iter(sequence), settings, args.out, total=args.frames,
-        progress=not args.no_progress, description=f"demo {args.scene}",
+        progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum,
     )
     _report(outcome)
     return 0
@@ -100,14 +148,16 @@ def cmd_demo(args) -> int:
 
 def cmd_run(args) -> int:
     from ..datasets import detect_source
-    from ..floorplan import Floorplan
+    from ..datasets.ros2 import parse_topic_overrides
     from .session_runner import run_session
 
     settings = _settings(args)
+    topics = parse_topic_overrides(args.topic)
     floorplan = None
     if args.floorplan is not None:
-        floorplan = Floorplan.load(args.floorplan, resolution=args.resolution, origin=args.origin, settings=settings)
-    sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed, settings=settings)
+        floorplan = load_floorplan(args, settings)
+    sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed,
+                             settings=settings, topics=topics)
     if sequence.settings_overrides:
         settings = load_settings(args.config, args.set, base_overrides=sequence.settings_overrides)
     if floorplan is None and sequence.source.startswith("carmen:"):
@@ -119,7 +169,7 @@ def cmd_run(args) -> int:
         )
     outcome = run_session(
         sequence.floorplan, sequence.frames(), settings, args.out, total=sequence.n_frames,
-        progress=not args.no_progress, description=f"run {args.input.name}",
+        progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum,
     )
     _report(outcome)
     return 0
@@ -127,13 +177,21 @@ def cmd_run(args) -> int:
 
 def _report(outcome) -> None:
     last = outcome.estimates[-1] if outcome.estimates else None
-    print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap ({len(outcome.estimates)} frames)")
+    print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap ({len(outcome.estimates)} frames); TUM: {outcome.tum_path}")
     if last is not None:
         print(f"final status: {last.status}, score {last.score:.3f}, scale {last.scale:.3f}")
     errors = outcome.final_errors()
     if errors is not None and len(errors):
         ok = bool((errors <= 1.0).all())
         print(f"final position error: {errors[-1]:.3f} m; last-10 max {errors.max():.3f} m; success@1m: {'yes' if ok else 'no'}")
+
+
+def cmd_export(args) -> int:
+    from ..tum import export_session_tum
+
+    rows = export_session_tum(args.session, args.tum)
+    print(f"wrote {args.tum} ({rows} poses)")
+    return 0
 
 
 def cmd_config(args) -> int:
@@ -151,6 +209,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_run(args)
         if args.command == "config":
             return cmd_config(args)
+        if args.command == "export":
+            return cmd_export(args)
         return args.func(args)
     except ZflocError as err:
         print(f"zfloc-stream: error: {err}", file=sys.stderr)

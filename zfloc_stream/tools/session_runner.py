@@ -17,6 +17,9 @@ from ..localizer import Localizer
 from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
+from ..tum import TumWriter
+
+TUM_NAME = "trajectory.tum"  # beside trajectory.csv unless --tum names another path
 
 
 @dataclass
@@ -24,6 +27,7 @@ class SessionOutcome:
     estimates: list[Estimate]
     truth: np.ndarray | None  # (N, 3) where every frame had ground truth
     out_dir: Path
+    tum_path: Path | None = None
 
     @property
     def poses(self) -> np.ndarray:
@@ -45,6 +49,7 @@ def run_session(
     total: int | None = None,
     progress: bool = True,
     description: str = "localizing",
+    tum: str | Path | None = None,
 ) -> SessionOutcome:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -53,6 +58,7 @@ def run_session(
     truths: list = []
     with (
         TrajectoryCsvWriter(out_dir / "trajectory.csv") as csv_writer,
+        TumWriter(out_dir / TUM_NAME if tum is None else tum) as tum_writer,
         SessionWriter(out_dir / "session.mcap", settings, floorplan) as log,
     ):
         for index, frame in enumerate(tqdm(frames, total=total, desc=description, disable=not progress, unit="frame")):
@@ -60,10 +66,11 @@ def run_session(
             est = localizer.push(frame)
             log.write_estimate(est, localizer)
             csv_writer.write(est)
+            tum_writer.write(est)
             estimates.append(est)
             truths.append(frame.ground_truth)
     truth = None if any(t is None for t in truths) or not truths else np.array(truths, dtype=float)
-    outcome = SessionOutcome(estimates, truth, out_dir)
+    outcome = SessionOutcome(estimates, truth, out_dir, tum_writer.path)
     best = localizer.tracker.best
     obs = localizer.last_observation
     save_overlay(

@@ -1,0 +1,84 @@
+"""TUM trajectories: the format evo's reader takes (evo.tools.file_interface.
+read_tum_trajectory_file: '#' comment lines, single-space separated rows of exactly 8
+floats, no trailing delimiter; PoseTrajectory3D wants ordered stamps and unit quaternions)."""
+
+import csv
+import math
+
+import numpy as np
+
+from zfloc_stream.estimate import Estimate
+from zfloc_stream.errors import InputError
+from zfloc_stream.session import record_session
+from zfloc_stream.sim import build_scene, simulate_laser
+from zfloc_stream.tools.cli import main
+from zfloc_stream.tum import TumWriter, export_session_tum
+
+import pytest
+
+
+def read_like_evo(path):
+    """The checks evo applies, written out: returns (stamps, xyz, quat_xyzw)."""
+    with open(path) as f:
+        rows = list(csv.reader((line for line in f if not line.startswith("#")), delimiter=" "))
+    assert rows and all(len(r) == 8 for r in rows), "TUM rows need 8 entries and no trailing space"
+    mat = np.array(rows).astype(float)
+    stamps, xyz, quat = mat[:, 0], mat[:, 1:4], mat[:, 4:]
+    assert np.all(np.diff(stamps) > 0)
+    np.testing.assert_allclose(np.linalg.norm(quat, axis=1), 1.0, atol=1e-9)
+    return stamps, xyz, quat
+
+
+def _est(frame, t, pose):
+    return Estimate(frame, t, "tracking" if pose is not None else "initializing", None if pose is None else np.array(pose),
+                    None, None, float("nan"), (), {}, None)
+
+
+def test_tum_rows_are_planar_poses_with_yaw_quaternions(tmp_path):
+    path = tmp_path / "t.tum"
+    with TumWriter(path) as tum:
+        tum.write(_est(0, 1.0, None))  # no pose yet: left out
+        tum.write(_est(1, 1.5, [1.0, 2.0, math.pi / 2]))
+        tum.write(_est(2, 1.5, [9.0, 9.0, 0.0]))  # same stamp again: left out
+        tum.write(_est(3, 2.0, [1.5, -2.0, -3.0]))
+    stamps, xyz, quat = read_like_evo(path)
+    np.testing.assert_allclose(stamps, [1.5, 2.0])
+    np.testing.assert_allclose(xyz, [[1.0, 2.0, 0.0], [1.5, -2.0, 0.0]])
+    np.testing.assert_allclose(quat[0], [0, 0, math.sin(math.pi / 4), math.cos(math.pi / 4)])
+    yaw = 2 * np.arctan2(quat[1, 2], quat[1, 3])
+    assert math.isclose(math.remainder(yaw + 3.0, 2 * math.pi), 0.0, abs_tol=1e-12)
+    assert path.read_text().splitlines()[0].startswith("# timestamp tx ty tz qx qy qz qw")
+
+
+def test_run_writes_tum_beside_the_csv_and_export_rewrites_it_from_the_session(tmp_path, capsys):
+    scene = build_scene("rooms", seed=0)
+    run = simulate_laser(scene, seed=0, n_frames=12)
+    from zfloc_stream import load_settings
+
+    settings = load_settings(None, [], base_overrides={"estimator": {"scale_mode": "fixed"}})
+    estimates = record_session(tmp_path / "session.mcap", scene.floorplan, run.frames, settings)
+    assert main(["export", str(tmp_path / "session.mcap"), "--tum", str(tmp_path / "out.txt")]) == 0
+    stamps, xyz, _ = read_like_evo(tmp_path / "out.txt")
+    with_pose = [e for e in estimates if e.pose is not None]
+    assert len(stamps) == len(with_pose) and "wrote" in capsys.readouterr().out
+    np.testing.assert_allclose(xyz[:, :2], [e.pose[:2] for e in with_pose], atol=1e-12)
+    # the same file from a live run: default beside trajectory.csv, or where --tum says
+    plan = scene.floorplan.write_ros(tmp_path / "plan")
+    assert main(["run", "--floorplan", str(plan), "--input", str(tmp_path / "session.mcap"), "--out", str(tmp_path / "r"), "--no-progress"]) == 0
+    assert (tmp_path / "r" / "trajectory.tum").read_text() == (tmp_path / "out.txt").read_text()
+    assert main(["run", "--input", str(tmp_path / "session.mcap"), "--out", str(tmp_path / "r2"), "--tum", str(tmp_path / "x" / "y.txt"), "--no-progress"]) == 0
+    assert (tmp_path / "x" / "y.txt").read_text() == (tmp_path / "out.txt").read_text()
+
+
+def test_export_of_a_session_without_estimates_is_a_one_line_error(tmp_path, capsys):
+    from zfloc_stream.session import SessionWriter
+    from zfloc_stream.config import Settings
+
+    frames = simulate_laser("rooms", seed=0, n_frames=2).frames
+    with SessionWriter(tmp_path / "inputs.mcap", Settings()) as log:
+        for i, f in enumerate(frames):
+            log.write_frame(i, f)
+    with pytest.raises(InputError, match="holds no logged estimates"):
+        export_session_tum(tmp_path / "inputs.mcap", tmp_path / "o.txt")
+    assert main(["export", str(tmp_path / "missing.mcap"), "--tum", str(tmp_path / "o.txt")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
