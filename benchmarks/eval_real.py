@@ -11,12 +11,18 @@ spread evenly along the log (they may overlap on short logs). Each window:
   trajectory.csv, frame by frame);
 - reference: exact correlative SE(2) search (0.1 m / 2 deg grid + LM, known scale) on all
   the window's wall points at once (zfloc_stream.estimation.correlative);
+- camera (--camera): the same window as depth + labels frames (160x120, 90 deg, pitch
+  +-8 deg, 1.3 m high, 1% depth noise) rendered by the simulator in the map of the WHOLE
+  log extruded into walls (sim.build_scene_from_floorplan), odometry drifting 2% of the
+  step per axis + 0.3 deg per step, localized at the default metric prior against the
+  same held-out map; its reference searches the localizer's final BEV wall points;
 - success (F3Loc): all of the last 10 frames within 1 m. A failure is attributed to "no
   pose" (a last-10 frame without pose), "lost" (final status lost) or "wrong mode".
 
     python benchmarks/eval_real.py                         # 5 logs x 5 lengths x 8 windows
     python benchmarks/eval_real.py --logs intel --lengths 20,50 --windows 3 --workers 2
     python benchmarks/eval_real.py --no-reference --set tracking.weight_gain=10
+    python benchmarks/eval_real.py --camera --windows 3           # camera rows too
 """
 
 from __future__ import annotations
@@ -31,8 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
+from functools import lru_cache
+
 from zfloc_stream.config import load_settings
 from zfloc_stream.datasets.carmen import carmen_sequence, load_log
+from zfloc_stream.mapping import map_from_log
+from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors
@@ -56,27 +66,29 @@ def laser_points(frame) -> np.ndarray:
     return local @ T[:2, :2].T + T[:2, 3]
 
 
-def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool) -> dict:
-    path = DATA / f"{log}-corrected.log.gz"
-    base = {"estimator": {"scale_mode": "fixed"}}
-    settings = load_settings(overrides=overrides, base_overrides=base).model_copy(update={"seed": seed})
-    seq = carmen_sequence(path, settings)
-    stop = start + length
-    floorplan = seq.floorplan_for(start, stop)
-    frames = list(seq.frames(start, stop))
-    truth = np.array([f.ground_truth for f in frames])
-    row = {"log": log, "start": start, "length": length, "seed": seed}
+CAMERA = SimSettings(camera_height=1.3, camera_height_jitter=0.0, max_pitch_deg=8.0, max_roll_deg=0.0, scale_error=0.0,
+                     furniture_as_wall_prob=0.0, wall_dropout=0.0, odom_origin_range=50.0)
 
+
+@lru_cache(maxsize=2)
+def world_of(log: str):
+    """The building a camera walks in: the map of the whole log, extruded into walls."""
+    path = DATA / f"{log}-corrected.log.gz"
+    settings = load_settings()
+    return build_scene_from_floorplan(map_from_log(load_log(path, settings), [], settings), seed=0)
+
+
+def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
+    """Push the frames through a fresh Localizer; success and where a failure came from."""
+    truth = np.array([f.ground_truth for f in frames])
     t0 = time.perf_counter()
     localizer = Localizer(floorplan, settings)
     estimates = [localizer.push(f) for f in frames]
-    row["seconds"] = time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
     errors = position_errors([e.pose for e in estimates], truth)
-    row["success"] = is_success(errors, 1.0)
-    row["final_error"] = float(errors[-1])
-    row["final_status"] = estimates[-1].status
-    first = next((i for i, e in enumerate(estimates) if e.pose is not None), None)
-    row["first_pose_frame"] = first
+    row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),
+           "final_status": estimates[-1].status,
+           "first_pose_frame": next((i for i, e in enumerate(estimates) if e.pose is not None), None)}
     if row["success"]:
         row["cause"] = ""
     elif not np.isfinite(errors[-10:]).all():
@@ -85,17 +97,54 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         row["cause"] = "lost"
     else:
         row["cause"] = "wrong mode"
+    return row, localizer
 
+
+def reference_row(floorplan, points, frames, yaw_of) -> dict:
+    """The exact correlative search on all points at once, judged like the localizer."""
+    t0 = time.perf_counter()
+    best = correlative_search(floorplan, points)[0]
+    poses = [np.array(best.alignment.apply_pose(f.T[0, 3], f.T[1, 3], yaw_of(f.T))) for f in frames]
+    errors = position_errors(poses, np.array([f.truth for f in frames]))
+    return {"ref_seconds": time.perf_counter() - t0, "ref_success": is_success(errors, 1.0), "ref_final_error": float(errors[-1])}
+
+
+class _Posed:
+    def __init__(self, T, truth):
+        self.T, self.truth = T, truth
+
+
+def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool, camera: bool = False) -> dict:
+    path = DATA / f"{log}-corrected.log.gz"
+    stop = start + length
+    row = {"log": log, "start": start, "length": length, "seed": seed, "sensor": "camera" if camera else "laser"}
+    if camera:
+        settings = load_settings(overrides=overrides).model_copy(update={"seed": seed})
+        seq = carmen_sequence(path, settings)
+        floorplan = seq.floorplan_for(start, stop)
+        truth = seq.ground_truth[start:stop]
+        frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames()
+        result, localizer = localize_frames(floorplan, frames, settings)
+        row.update(result)
+        if reference:
+            obs = localizer.last_observation
+            posed = [_Posed(f.T_odom_cam, f.ground_truth) for f in frames]
+            if obs is None:
+                row.update(ref_seconds=0.0, ref_success=False, ref_final_error=float("inf"))
+            else:  # camera z is the optical axis: heading from its ground-plane projection
+                row.update(reference_row(floorplan, obs.wall_points, posed, lambda T: np.arctan2(T[1, 2], T[0, 2])))
+        return row
+    base = {"estimator": {"scale_mode": "fixed"}}
+    settings = load_settings(overrides=overrides, base_overrides=base).model_copy(update={"seed": seed})
+    seq = carmen_sequence(path, settings)
+    floorplan = seq.floorplan_for(start, stop)
+    frames = list(seq.frames(start, stop))
+    result, _ = localize_frames(floorplan, frames, settings)
+    row.update(result)
     if reference:
-        t0 = time.perf_counter()
         points = np.concatenate([laser_points(f) for f in frames])
-        best = correlative_search(floorplan, points)[0]
-        odom = [f.T_odom_sensor for f in frames]
-        poses = [np.array(best.alignment.apply_pose(T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0]))) for T in odom]
-        ref_errors = position_errors(poses, truth)
-        row["ref_seconds"] = time.perf_counter() - t0
-        row["ref_success"] = is_success(ref_errors, 1.0)
-        row["ref_final_error"] = float(ref_errors[-1])
+        posed = [_Posed(f.T_odom_sensor, f.ground_truth) for f in frames]
+        row.update(reference_row(floorplan, points, posed, lambda T: np.arctan2(T[1, 0], T[0, 0])))
     return row
 
 
@@ -104,6 +153,11 @@ def _pct(values) -> str:
 
 
 def table(rows: list[dict], lengths: list[int], reference: bool) -> str:
+    return "\n\n".join(f"### {sensor}\n\n" + sensor_table([r for r in rows if r["sensor"] == sensor], lengths, reference)
+                       for sensor in dict.fromkeys(r["sensor"] for r in rows))
+
+
+def sensor_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     by_len = defaultdict(list)
     for r in rows:
         by_len[r["length"]].append(r)
@@ -134,6 +188,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--no-reference", action="store_true", help="skip the brute-force reference")
+    parser.add_argument("--camera", action="store_true", help="also run the windows as rendered camera frames")
+    parser.add_argument("--no-laser", action="store_true", help="skip the laser windows")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings override")
     parser.add_argument("--json", type=Path, help="write every window's row here")
     args = parser.parse_args(argv)
@@ -143,7 +199,9 @@ def main(argv=None) -> int:
     for log in logs:
         n = len(load_log(DATA / f"{log}-corrected.log.gz", load_settings()))
         for length in lengths:
-            jobs += [(log, s, length, args.seed, args.set, not args.no_reference) for s in window_starts(n, length, args.windows)]
+            for start in window_starts(n, length, args.windows):
+                for camera in [False] * (not args.no_laser) + [True] * args.camera:
+                    jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
     if args.workers > 1:
         with ProcessPoolExecutor(args.workers) as pool:
