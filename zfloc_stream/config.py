@@ -231,7 +231,7 @@ class BevSettings(Section):
     wall_min_ratio: float = Field(0.5, ge=0, le=1)  # ...and at least this fraction of the frames that hit the cell
     min_wall_points_per_cell: int = Field(3, ge=1, le=10_000)  # camera: wall points one frame must put in a cell to count (laser: 1)
     free_margin: float = Field(0.1, ge=0, le=10)  # m, rays stop this short of the obstacle they hit
-    azimuth_bin_deg: float = Field(0.5, gt=0, le=45)  # camera free space: one ray per azimuth bin
+    azimuth_bin_deg: float = Field(0.5, ge=0.01, le=45)  # camera free space: one ray per azimuth bin
     crop_margin: float = Field(0.5, ge=0, le=100)  # m, observation is cropped to the known cells plus this margin
     trajectory_length: int = Field(10000, ge=1, le=1_000_000)  # plane poses kept (bounded memory)
 
