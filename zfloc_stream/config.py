@@ -390,6 +390,15 @@ class StudySettings(Section):
     connect_timeout_s: float = Field(10.0, gt=0, le=86_400)  # s, waiting for a remote dask scheduler (--scheduler)
 
 
+class ReplaySettings(Section):
+    """zfloc-replay --check: decisions (statuses, modes, hypothesis counts, skips) must
+    match exactly; numbers within atol + rtol * max(|logged|, |replayed|), because another
+    CPU or BLAS may change their last bits (--exact: bit for bit). Never affects the estimates."""
+
+    rtol: float = Field(1e-9, ge=0, le=1)  # relative tolerance on logged numbers
+    atol: float = Field(1e-12, ge=0, le=1)  # absolute tolerance (numbers near zero)
+
+
 class Settings(Section):
     seed: int = Field(0, ge=0, le=2**63 - 1)
     floorplan: FloorplanSettings = FloorplanSettings()
@@ -402,6 +411,7 @@ class Settings(Section):
     logging: LoggingSettings = LoggingSettings()
     datasets: DatasetSettings = DatasetSettings()
     study: StudySettings = StudySettings()
+    replay: ReplaySettings = ReplaySettings()
 
 
 def _merge(base: dict, update: dict) -> dict:
