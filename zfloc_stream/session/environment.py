@@ -44,7 +44,7 @@ def _blas() -> str:
     blas = [lib for lib in threadpool_info() if lib.get("user_api") == "blas"]
     bundled = [lib for lib in blas if Path(lib.get("filepath", "")).parent.name in ("numpy.libs", "scipy.libs")]
     texts = [" ".join(str(lib[k]) for k in ("internal_api", "version", "architecture") if lib.get(k)) for lib in bundled or blas]
-    return ", ".join(dict.fromkeys(texts)) or "none found"
+    return ", ".join(sorted(set(texts))) or "none found"  # sorted: load order varies
 
 
 def _cpu_model() -> str:
