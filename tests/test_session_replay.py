@@ -275,25 +275,26 @@ def test_sessions_record_their_environment_and_a_replay_elsewhere_says_so(record
     assert lines.index(note[0]) < next(i for i, line in enumerate(lines) if line.startswith(("identical", "same decisions")))
 
 
-def test_replay_with_numpy_simd_limited_passes_the_check(recorded):
-    """Another code path for numpy's kernels (NPY_DISABLE_CPU_FEATURES), in a fresh process:
-    the environment line says so and the decisions still match."""
+def test_sample_replays_in_a_perturbed_environment(capsys):
+    """Another environment in a fresh process: OpenBLAS forced onto its generic kernels
+    (OPENBLAS_CORETYPE) and numpy's dispatched SIMD kernels disabled
+    (NPY_DISABLE_CPU_FEATURES). The environment line says so, the decisions still match and
+    the numbers stay within the tolerance (on the development machine the BLAS change moves
+    the last bits: --exact then reports frame 4, as on the CPU in issue 11)."""
     import os
     import subprocess
     import sys
-
-    from zfloc_stream.session import environment
 
     try:
         from numpy._core import _multiarray_umath as umath
     except ImportError:
         from numpy.core import _multiarray_umath as umath
     dispatched = [f for f in umath.__cpu_dispatch__ if umath.__cpu_features__.get(f) and f not in umath.__cpu_baseline__]
-    if not dispatched:
-        pytest.skip("this CPU uses no dispatched numpy SIMD feature to disable")
-    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(dispatched)}
+    env = {**os.environ, "OPENBLAS_CORETYPE": "Prescott"}
+    if dispatched:
+        env["NPY_DISABLE_CPU_FEATURES"] = " ".join(dispatched)
+    sample = Path(__file__).resolve().parents[1] / "replay" / "symmetric-camera-small.mcap"
     code = "import sys; from zfloc_stream.tools.replay_cli import main; sys.exit(main(sys.argv[1:]))"
-    run = subprocess.run([sys.executable, "-c", code, str(recorded), "--check", "--no-progress"], env=env, capture_output=True, text=True, timeout=600)
+    run = subprocess.run([sys.executable, "-c", code, str(sample), "--check", "--no-progress"], env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert "environment: recorded elsewhere: simd: " + environment.current()["simd"] in run.stdout
-    assert "frames checked" in run.stdout
+    assert run.stdout.startswith("environment: recorded elsewhere: ") and "frames checked" in run.stdout

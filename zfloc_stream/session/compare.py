@@ -59,18 +59,21 @@ class Divergence:
 
 @dataclass
 class Deviation:
-    """The largest numeric deviation seen on one topic (relative to max(|a|, |b|))."""
+    """The largest numeric deviation seen on one topic: the one closest to its tolerance
+    (the largest relative one when comparing bit for bit)."""
 
     abs: float = 0.0
-    rel: float = 0.0
+    rel: float = 0.0  # |a - b| / max(|a|, |b|)
     frame: int | None = None
     field: str = ""
     values: int = 0  # numbers compared
+    _rank: float = 0.0
 
-    def see(self, frame: int, name: str, diff: float, scale: float) -> None:
+    def see(self, frame: int, name: str, diff: float, scale: float, allowed: float = 0.0) -> None:
         rel = diff / scale if scale > 0 else 0.0
-        if diff > 0 and (rel, diff) > (self.rel, self.abs):
-            self.abs, self.rel, self.frame, self.field = diff, rel, frame, name
+        rank = diff / allowed if allowed > 0 else rel
+        if diff > 0 and (rank, diff) > (self._rank, self.abs):
+            self.abs, self.rel, self.frame, self.field, self._rank = diff, rel, frame, name, rank
 
     def __str__(self) -> str:
         if self.abs == 0:
@@ -125,8 +128,8 @@ class Comparison:
                     dev.see(index, key, abs(va - vb), max(abs(va), abs(vb)))
                 continue
             diff, scale = abs(va - vb), max(abs(va), abs(vb))
-            dev.see(index, key, diff, scale)
             allowed = tol.atol + tol.rtol * scale
+            dev.see(index, key, diff, scale, allowed)
             if diff > allowed:
                 return Divergence(index, topic, key, va, vb, f"|difference| {diff:.3g} > tolerance {allowed:.3g}")
         return None
@@ -137,15 +140,16 @@ class Comparison:
         both_nan = np.isnan(x) & np.isnan(y)
         diff = np.where(both_nan, 0.0, np.abs(x - y))
         diff = np.where(np.isnan(diff) | np.isinf(diff), np.where(x == y, 0.0, np.inf), diff)
-        scale = np.maximum(np.abs(x), np.abs(y))
+        scale = np.where(np.isfinite(x) & np.isfinite(y), np.maximum(np.abs(x), np.abs(y)), 0.0)
+        rtol = max(self.tolerance.rtol, FLOAT32_RTOL) if a.dtype == np.float32 else self.tolerance.rtol
+        allowed = self.tolerance.atol + rtol * scale
         if diff.size:
-            worst = int(np.argmax(diff))
-            dev.see(index, f"{key}[{worst}]", float(diff.flat[worst]), float(scale.flat[worst]) if np.isfinite(scale.flat[worst]) else 0.0)
+            worst = int(np.argmax(diff / np.maximum(allowed, np.finfo(float).tiny)))
+            dev.see(index, f"{key}[{worst}]", float(diff.flat[worst]), float(scale.flat[worst]), float(allowed.flat[worst]))
         if self.tolerance.exact:
             bad = np.flatnonzero(~((x == y) | both_nan))
         else:
-            rtol = max(self.tolerance.rtol, FLOAT32_RTOL) if a.dtype == np.float32 else self.tolerance.rtol
-            bad = np.flatnonzero(diff > self.tolerance.atol + rtol * np.where(np.isfinite(scale), scale, 0.0))
+            bad = np.flatnonzero(diff > allowed)
         if bad.size:
             i = int(bad[0])
             return Divergence(index, topic, f"{key}[{i}]", float(x.flat[i]), float(y.flat[i]), f"{bad.size} of {x.size} values differ")
