@@ -109,7 +109,7 @@ class SolverSettings(Section):
     normal_consistency: float = Field(0.95, ge=0, le=1)  # tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L) before solving
     scale_prior_ggd_shape: float = Field(4.0, gt=0, le=100)  # 2L: generalised Gaussian noise on the metric scale
     scale_prior_prob: float = Field(0.8, gt=0, lt=1)  # P(|eps| <= scale_prior_window * s) = this
-    scale_prior_window: float = Field(0.1, gt=0, le=1)
+    scale_prior_window: float = Field(0.1, ge=0, le=1)
     min_scale: float = Field(0.5, gt=0, le=100)  # models outside [min_scale, max_scale] are discarded
     max_scale: float = Field(2.0, gt=0, le=100)
     parallel_angle_deg: float = Field(10.0, ge=0, lt=90)  # lines closer than this in direction count as parallel (degenerate)

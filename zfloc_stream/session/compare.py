@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import ReplaySettings
 from . import schemas as S
 
 FLOAT32_RTOL = 2 * float(np.finfo(np.float32).eps)  # BEV log-odds are stored as float32
@@ -32,8 +33,8 @@ FLOAT32_RTOL = 2 * float(np.finfo(np.float32).eps)  # BEV log-odds are stored as
 
 @dataclass(frozen=True)
 class Tolerance:
-    rtol: float = 1e-9
-    atol: float = 1e-12
+    rtol: float = ReplaySettings().rtol  # defaults: the replay settings'
+    atol: float = ReplaySettings().atol
     exact: bool = False  # bit for bit (the recording machine)
 
     def __str__(self) -> str:
