@@ -3,58 +3,93 @@
 Every number the algorithm uses has a name here; configs/default.yaml is the dump of
 these defaults (a test keeps the two identical). Unknown keys are errors, so a typo in a
 config file fails loudly instead of being ignored.
+
+Every setting carries its allowed range where it is declared (pydantic Field
+constraints: gt/ge/lt/le on numbers, min_length on lists and strings; NaN and infinity
+are refused everywhere), and pairs that must be ordered (min < max) are checked by
+`ordered(...)` in their section. A value outside its range is one ConfigError line that
+names the dotted key, the value and the allowed range. A new setting gets its bounds the
+same way: `name: float = Field(default, gt=0, le=10)  # unit, meaning`.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import PydanticCustomError
 
 from .errors import ConfigError
 
 SolverName = Literal["3L", "2L", "2C", "LC"]
 ScaleMode = Literal["free", "prior", "fixed"]
 
+MAX_BEV_HALF_CELLS = 2000
+
 
 class Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN or infinity is never a usable setting (a NaN threshold silently fails every comparison)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def section_rule_error(key: str, value: object, message: str, related: tuple[str, ...]) -> PydanticCustomError:
+    """A cross-field rule broken in a section: `key` (the field reported) and the `related`
+    fields named in `message` are spelled in full (dotted) by the error formatter."""
+    return PydanticCustomError("section_rule", message, {"key": key, "value": value, "related": related})
+
+
+def ordered(*pairs: tuple[str, str] | tuple[str, str, str]):
+    """A section validator: for each (low, high) pair of field names, low < high
+    (low <= high where the pair ends with "<=")."""
+
+    def check(section):
+        for low, high, *how in pairs:
+            a, b = getattr(section, low), getattr(section, high)
+            if not (a <= b if how == ["<="] else a < b):
+                relation = "at most" if how == ["<="] else "less than"
+                raise section_rule_error(low, a, f"must be {relation} {high} ({b})", (high,))
+        return section
+
+    return model_validator(mode="after")(check)
 
 
 class LineSettings(Section):
     """Seeded region growing (paper 3.1)."""
 
-    neighbourhood_radius: float = 0.25  # m, PCA neighbourhood of a seed
-    min_seed_neighbours: int = 3  # fewer free points around a seed: it is noise
-    local_radius: float = 2.0  # m, a line first grows inside this window around its seed (speed)
-    inlier_distance: float = 0.05  # m, orthogonal distance to grow a line
-    gap: float = 0.3  # m, largest gap along a line before it is split
-    max_grow_iterations: int = 20  # refit/regrow rounds per seed (usually converges in 2-4)
-    converge_tolerance: float = 0.001  # m, growth stops once a refit moves the line less than this
-    min_points: int = 8
-    min_length: float = 0.5  # m
-    dedup_angle_deg: float = 5.0  # near-duplicate suppression
-    dedup_offset: float = 0.15  # m
+    neighbourhood_radius: float = Field(0.25, gt=0, le=5)  # m, PCA neighbourhood of a seed
+    min_seed_neighbours: int = Field(3, ge=2, le=1000)  # fewer free points around a seed: it is noise
+    local_radius: float = Field(2.0, gt=0, le=100)  # m, a line first grows inside this window around its seed (speed)
+    inlier_distance: float = Field(0.05, gt=0, le=1)  # m, orthogonal distance to grow a line
+    gap: float = Field(0.3, gt=0, le=10)  # m, largest gap along a line before it is split
+    max_grow_iterations: int = Field(20, ge=1, le=1000)  # refit/regrow rounds per seed (usually converges in 2-4)
+    converge_tolerance: float = Field(0.001, gt=0, le=1)  # m, growth stops once a refit moves the line less than this
+    min_points: int = Field(8, ge=2, le=100_000)
+    min_length: float = Field(0.5, ge=0, le=100)  # m
+    dedup_angle_deg: float = Field(5.0, ge=0, le=90)  # near-duplicate suppression
+    dedup_offset: float = Field(0.15, ge=0, le=10)  # m
 
 
 class CircleSettings(Section):
     """HDBSCAN clustering + 3-point RANSAC + angular checks (paper 3.1)."""
 
-    min_cluster_size: int = 10
-    hdbscan_min_samples: int = 2  # small: a thin pillar ring has few points per neighbourhood (larger values drop arc points as noise)
-    ransac_iterations: int = 100
-    inlier_distance: float = 0.03  # m
-    min_radius: float = 0.1  # m
-    max_radius: float = 1.0  # m
-    min_inlier_ratio: float = 0.8
-    min_coverage_deg: float = 120.0  # 2*pi minus the largest angular gap
-    max_gap_deg: float = 30.0  # angular continuity: consecutive gaps below this...
-    min_span_deg: float = 90.0  # ...over a contiguous span at least this long
-    group_link_distance: float = 0.15  # m, points closer than this are one group; groups wider than a pillar are skipped
-    refit_rounds: int = 2  # least-squares refit + inlier re-selection rounds
-    refit_iterations: int = 10  # Gauss-Newton steps per refit
+    min_cluster_size: int = Field(10, ge=2, le=100_000)
+    hdbscan_min_samples: int = Field(2, ge=1, le=1000)  # small: a thin pillar ring has few points per neighbourhood (larger values drop arc points as noise)
+    ransac_iterations: int = Field(100, ge=1, le=100_000)
+    inlier_distance: float = Field(0.03, gt=0, le=1)  # m
+    min_radius: float = Field(0.1, gt=0, le=10)  # m
+    max_radius: float = Field(1.0, gt=0, le=10)  # m
+    min_inlier_ratio: float = Field(0.8, ge=0, le=1)
+    min_coverage_deg: float = Field(120.0, ge=0, le=360)  # 2*pi minus the largest angular gap
+    max_gap_deg: float = Field(30.0, gt=0, le=360)  # angular continuity: consecutive gaps below this...
+    min_span_deg: float = Field(90.0, ge=0, le=360)  # ...over a contiguous span at least this long
+    group_link_distance: float = Field(0.15, gt=0, le=10)  # m, points closer than this are one group; groups wider than a pillar are skipped
+    refit_rounds: int = Field(2, ge=0, le=100)  # least-squares refit + inlier re-selection rounds
+    refit_iterations: int = Field(10, ge=1, le=1000)  # Gauss-Newton steps per refit
+
+    _ordered = ordered(("min_radius", "max_radius"))
 
 
 class PrimitiveSettings(Section):
@@ -63,54 +98,56 @@ class PrimitiveSettings(Section):
 
 
 class FloorplanSettings(Section):
-    neighbour_distance: float = 6.0  # m, lines closer than this are spatial neighbours (3L pruning)
-    wall_sample_spacing: float = 0.2  # m, floorplan wall pixels used by Cv are subsampled to this (a ratio: 0.2 m is plenty, 16x cheaper than 0.05)
-    line_point_spacing: float = 0.025  # m, wall-face pixels are subsampled to this before line extraction
-    image_wall_threshold: float = 0.5  # plain images: occupancy (255 - v) / 255 above this is wall
+    neighbour_distance: float = Field(6.0, gt=0, le=1000)  # m, lines closer than this are spatial neighbours (3L pruning)
+    wall_sample_spacing: float = Field(0.2, gt=0, le=10)  # m, floorplan wall pixels used by Cv are subsampled to this (a ratio: 0.2 m is plenty, 16x cheaper than 0.05)
+    line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
+    image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
 
 
 class SolverSettings(Section):
-    pool: list[SolverName] = ["3L", "2L", "2C", "LC"]
-    normal_consistency: float = 0.95  # tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L) before solving
-    scale_prior_ggd_shape: float = 4.0  # 2L: generalised Gaussian noise on the metric scale
-    scale_prior_prob: float = 0.8  # P(|eps| <= scale_prior_window * s) = this
-    scale_prior_window: float = 0.1
-    min_scale: float = 0.5  # models outside [min_scale, max_scale] are discarded
-    max_scale: float = 2.0
-    prior_range: float = 0.15  # prior mode: scales outside prior * [1 / (1 + r), 1 + r] are discarded too (depth cameras and VIO: a few %; monocular depth networks: ~10 %)
-    parallel_angle_deg: float = 10.0  # lines closer than this in direction count as parallel (degenerate)
-    min_baseline: float = 0.3  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
-    singular_tolerance: float = 1e-9  # relative determinant below which a linear solve is degenerate
-    radius_tolerance: float = 0.5  # 2C/LC: model rejected when r_floorplan / (s r_bev) leaves [1/(1+x), 1+x]
+    pool: list[SolverName] = Field(["3L", "2L", "2C", "LC"], min_length=1)
+    normal_consistency: float = Field(0.95, ge=0, le=1)  # tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L) before solving
+    scale_prior_ggd_shape: float = Field(4.0, gt=0, le=100)  # 2L: generalised Gaussian noise on the metric scale
+    scale_prior_prob: float = Field(0.8, gt=0, lt=1)  # P(|eps| <= scale_prior_window * s) = this
+    scale_prior_window: float = Field(0.1, ge=0, le=1)
+    min_scale: float = Field(0.5, gt=0, le=100)  # models outside [min_scale, max_scale] are discarded
+    max_scale: float = Field(2.0, gt=0, le=100)
+    prior_range: float = Field(0.15, gt=0, le=10)  # prior mode: scales outside prior * [1 / (1 + r), 1 + r] are discarded too (depth cameras and VIO: a few %; monocular depth networks: ~10 %)
+    parallel_angle_deg: float = Field(10.0, ge=0, lt=90)  # lines closer than this in direction count as parallel (degenerate)
+    min_baseline: float = Field(0.3, ge=0, le=100)  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
+    singular_tolerance: float = Field(1e-9, gt=0, lt=1)  # relative determinant below which a linear solve is degenerate
+    radius_tolerance: float = Field(0.5, gt=0, le=10)  # 2C/LC: model rejected when r_floorplan / (s r_bev) leaves [1/(1+x), 1+x]
+
+    _ordered = ordered(("min_scale", "max_scale"))
 
 
 class ScoringSettings(Section):
-    tau_c: float = 0.1  # m, consistency threshold (paper)
-    tau_v: float = 0.2  # m, violation threshold (paper)
-    sparse_spacing: float = 0.25  # m, spacing of BEV line samples for the coarse pass
-    max_sparse_points: int = 128  # ...widened so the coarse pass uses about this many points at most
-    top_k: int = 50  # hypotheses re-ranked with the full score
-    distinct_translation: float = 0.5  # m, hypotheses closer than this (and distinct_angle) are one
-    distinct_angle_deg: float = 10.0
-    chunk_size: int = 1_000_000  # (hypotheses x points) elements per vectorised block: bounds memory
-    wall_bucket_size: float = 2.0  # m, Cv fetches floorplan wall points by buckets of this size (speed only)
+    tau_c: float = Field(0.1, gt=0, le=10)  # m, consistency threshold (paper)
+    tau_v: float = Field(0.2, gt=0, le=10)  # m, violation threshold (paper)
+    sparse_spacing: float = Field(0.25, gt=0, le=10)  # m, spacing of BEV line samples for the coarse pass
+    max_sparse_points: int = Field(128, ge=1, le=1_000_000)  # ...widened so the coarse pass uses about this many points at most
+    top_k: int = Field(50, ge=1, le=100_000)  # hypotheses re-ranked with the full score
+    distinct_translation: float = Field(0.5, ge=0, le=1000)  # m, hypotheses closer than this (and distinct_angle) are one
+    distinct_angle_deg: float = Field(10.0, ge=0, le=180)
+    chunk_size: int = Field(1_000_000, ge=1000, le=1_000_000_000)  # (hypotheses x points) elements per vectorised block: bounds memory
+    wall_bucket_size: float = Field(2.0, ge=0.1, le=100)  # m, Cv fetches floorplan wall points by buckets of this size (speed only)
 
 
 class RefineSettings(Section):
-    huber_delta: float = 0.1  # m
-    max_evaluations: int = 30  # residual evaluations per hypothesis (converges in ~10)
-    top_n: int = 10  # hypotheses refined (in one vectorised batch)
-    max_points: int = 1000  # BEV wall points used by the refinement (evenly thinned)
-    tolerance: float = 1e-4  # stop: relative cost decrease, step or gradient below this
-    initial_damping: float = 1e-3  # Levenberg-Marquardt lambda at the start
-    damping_factor: float = 10.0  # lambda divided by this after a good step, multiplied after a bad one
+    huber_delta: float = Field(0.1, gt=0, le=10)  # m
+    max_evaluations: int = Field(30, ge=1, le=10_000)  # residual evaluations per hypothesis (converges in ~10)
+    top_n: int = Field(10, ge=1, le=1000)  # hypotheses refined (in one vectorised batch)
+    max_points: int = Field(1000, ge=10, le=1_000_000)  # BEV wall points used by the refinement (evenly thinned)
+    tolerance: float = Field(1e-4, gt=0, le=1)  # stop: relative cost decrease, step or gradient below this
+    initial_damping: float = Field(1e-3, gt=0, le=1e6)  # Levenberg-Marquardt lambda at the start
+    damping_factor: float = Field(10.0, gt=1, le=1000)  # lambda divided by this after a good step, multiplied after a bad one
 
 
 class RansacSettings(Section):
-    iterations: int = 500  # BEV minimal samples per localization (solver drawn at random per sample)
-    tracking_iterations: int = 150  # fewer fresh samples while one mode is tracked
-    max_hypotheses: int = 10  # ranked distinct hypotheses returned
-    match_fraction: float = 0.03  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
+    iterations: int = Field(500, ge=1, le=1_000_000)  # BEV minimal samples per localization (solver drawn at random per sample)
+    tracking_iterations: int = Field(150, ge=1, le=1_000_000)  # fewer fresh samples while one mode is tracked
+    max_hypotheses: int = Field(10, ge=1, le=1000)  # ranked distinct hypotheses returned
+    match_fraction: float = Field(0.03, gt=0, le=1)  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
 
 
 class CorrelativeSettings(Section):
@@ -121,10 +158,10 @@ class CorrelativeSettings(Section):
     from scans; the exhaustive count does not, and costs one FFT correlation per angle."""
 
     enabled: bool = True  # runs in global rounds (not while confidently tracking), fixed or prior scale only
-    cell: float = 0.25  # m, translation grid (and rasterisation of the BEV points)
-    angle_step_deg: float = 4.0  # rotation grid
-    tolerance: float = 0.3  # m, a point within this of a wall counts (coarse grid: about cell + LM basin)
-    peaks: int = 10  # distinct placements refined and added to the hypotheses
+    cell: float = Field(0.25, ge=0.01, le=10)  # m, translation grid (and rasterisation of the BEV points)
+    angle_step_deg: float = Field(4.0, ge=0.1, le=90)  # rotation grid
+    tolerance: float = Field(0.3, gt=0, le=10)  # m, a point within this of a wall counts (coarse grid: about cell + LM basin)
+    peaks: int = Field(10, ge=1, le=1000)  # distinct placements refined and added to the hypotheses
 
 
 class EstimatorSettings(Section):
@@ -132,7 +169,7 @@ class EstimatorSettings(Section):
     # fixed: exactly metric (a laser; sources that know set it); free: any scale in
     # [min_scale, max_scale] (the paper's setting, on request).
     scale_mode: ScaleMode = "prior"
-    scale_prior: float = 1.0  # expected BEV -> floorplan scale in prior mode (1 = both metric)
+    scale_prior: float = Field(1.0, gt=0, le=100)  # expected BEV -> floorplan scale in prior mode (1 = both metric)
     solvers: SolverSettings = SolverSettings()
     correlative: CorrelativeSettings = CorrelativeSettings()
     scoring: ScoringSettings = ScoringSettings()
@@ -148,124 +185,148 @@ class GravitySettings(Section):
     """
 
     trust_odometry: bool = False  # VIO already gravity-aligned: take -z of odom as gravity
-    min_floor_points: int = 300  # accumulated floor points needed before gravity is frozen
-    min_frames: int = 2  # frames contributing floor points before gravity is frozen
-    points_per_frame: int = 1000  # floor points kept per frame (random subsample)
-    max_points: int = 10000  # cap on accumulated floor points
-    ransac_iterations: int = 100  # 3-point plane hypotheses
-    inlier_distance: float = 0.03  # m, point-to-plane distance of a floor inlier
-    refine_iterations: int = 3  # PCA re-fits on the inliers of the previous fit
-    max_pending_frames: int = 20  # frames buffered while gravity is unknown (oldest dropped)
-    floor_height_smoothing: float = 0.2  # EMA factor of a frame's floor height (tracks slow z drift)
+    min_floor_points: int = Field(300, ge=3, le=10_000_000)  # accumulated floor points needed before gravity is frozen
+    min_frames: int = Field(2, ge=1, le=1000)  # frames contributing floor points before gravity is frozen
+    points_per_frame: int = Field(1000, ge=3, le=10_000_000)  # floor points kept per frame (random subsample)
+    max_points: int = Field(10000, ge=3, le=10_000_000)  # cap on accumulated floor points
+    ransac_iterations: int = Field(100, ge=1, le=100_000)  # 3-point plane hypotheses
+    inlier_distance: float = Field(0.03, gt=0, le=1)  # m, point-to-plane distance of a floor inlier
+    refine_iterations: int = Field(3, ge=0, le=100)  # PCA re-fits on the inliers of the previous fit
+    max_pending_frames: int = Field(20, ge=1, le=10_000)  # frames buffered while gravity is unknown (oldest dropped)
+    floor_height_smoothing: float = Field(0.2, ge=0, le=1)  # EMA factor of a frame's floor height (tracks slow z drift)
+
+    _ordered = ordered(("min_floor_points", "max_points", "<="))
 
 
 class WallMaskSettings(Section):
     """Gravity-aligned column filter on the wall mask (paper eqs. 1-5)."""
 
     enabled: bool = True
-    tau_d: float = 0.3  # m (paper's tau_d): a non-wall pixel deeper than median + tau_d drops the column
-    segment_gap: float = 0.1  # m, depth gap that splits a column's wall pixels into segments...
-    segment_gap_per_m: float = 0.01  # ...plus this much per metre of depth (noise grows with depth)
-    min_forward_depth: float = 0.05  # m, points closer than this to the upright image plane are not warped
+    tau_d: float = Field(0.3, gt=0, le=10)  # m (paper's tau_d): a non-wall pixel deeper than median + tau_d drops the column
+    segment_gap: float = Field(0.1, gt=0, le=10)  # m, depth gap that splits a column's wall pixels into segments...
+    segment_gap_per_m: float = Field(0.01, ge=0, le=1)  # ...plus this much per metre of depth (noise grows with depth)
+    min_forward_depth: float = Field(0.05, gt=0, le=10)  # m, points closer than this to the upright image plane are not warped
 
 
 class LabellerSettings(Section):
     """Geometric labeller for frames without labels (gravity frame, depth normals)."""
 
-    floor_tolerance: float = 0.08  # m, |height above floor| below this (and not vertical): floor
-    vertical_normal_max_z: float = 0.35  # |n_z| below this: a vertical surface
-    wall_min_height: float = 0.3  # m above floor, lower vertical surfaces are clutter ("other")
-    ceiling_min_height: float = 1.8  # m above floor, non-vertical surfaces higher than this: ceiling
-    normal_step: int = 2  # px, finite-difference step for depth normals
-    max_tilt_deg: float = 35.0  # bootstrap: floor normal within this of the camera's up axis
-    bootstrap_min_below: float = 0.5  # m, bootstrap floor candidates lie this far below the camera
+    floor_tolerance: float = Field(0.08, gt=0, le=1)  # m, |height above floor| below this (and not vertical): floor
+    vertical_normal_max_z: float = Field(0.35, gt=0, le=1)  # |n_z| below this: a vertical surface
+    wall_min_height: float = Field(0.3, ge=0, le=10)  # m above floor, lower vertical surfaces are clutter ("other")
+    ceiling_min_height: float = Field(1.8, gt=0, le=10)  # m above floor, non-vertical surfaces higher than this: ceiling
+    normal_step: int = Field(2, ge=1, le=100)  # px, finite-difference step for depth normals
+    max_tilt_deg: float = Field(35.0, gt=0, le=90)  # bootstrap: floor normal within this of the camera's up axis
+    bootstrap_min_below: float = Field(0.5, ge=0, le=10)  # m, bootstrap floor candidates lie this far below the camera
+
+    _ordered = ordered(("wall_min_height", "ceiling_min_height"))
 
 
 class FrontendSettings(Section):
     gravity: GravitySettings = GravitySettings()
     wall_mask: WallMaskSettings = WallMaskSettings()
     labeller: LabellerSettings = LabellerSettings()
-    pixel_stride: int = 0  # camera pixels used: every pixel_stride-th row and column (0: automatic)...
-    target_pixels: int = 12000  # ...automatic: stride = max(1, floor(sqrt(H * W / target_pixels)))
-    max_depth: float = 10.0  # m, depth readings beyond this are ignored
-    min_obstacle_height: float = 0.1  # m above floor: lower non-floor points do not occupy
-    max_obstacle_height: float = 2.0  # m above floor: higher points do not occupy (ceiling, lamps)
+    pixel_stride: int = Field(0, ge=0, le=1000)  # camera pixels used: every pixel_stride-th row and column (0: automatic)...
+    target_pixels: int = Field(12000, ge=1, le=100_000_000)  # ...automatic: stride = max(1, floor(sqrt(H * W / target_pixels)))
+    max_depth: float = Field(10.0, gt=0, le=1000)  # m, depth readings beyond this are ignored
+    min_obstacle_height: float = Field(0.1, ge=0, le=10)  # m above floor: lower non-floor points do not occupy
+    max_obstacle_height: float = Field(2.0, gt=0, le=20)  # m above floor: higher points do not occupy (ceiling, lamps)
+
+    _ordered = ordered(("min_obstacle_height", "max_obstacle_height"))
 
 
 class BevSettings(Section):
     """Rolling log-odds BEV in the gravity-aligned odometry plane (scrolling fixed-size grid)."""
 
-    resolution: float = 0.05  # m per cell
-    window_radius: float = 15.0  # m, cells farther than this from the sensor are dropped
-    recenter_distance: float = 1.0  # m, the grid scrolls when the sensor leaves this box around its centre
-    logodds_hit: float = 0.85  # added to a cell holding an obstacle point (once per frame)
-    logodds_free: float = -0.4  # added to a cell crossed by a ray (once per frame)
-    logodds_min: float = -2.0  # clamp, so old evidence can be overturned
-    logodds_max: float = 3.5
-    free_threshold: float = -0.3  # log-odds below this: observed free space
-    occupied_threshold: float = 0.0  # log-odds above this: occupied
-    wall_min_observations: int = 1  # frames that saw wall evidence in a cell before it is a wall point
-    wall_min_ratio: float = 0.5  # ...and at least this fraction of the frames that hit the cell
-    min_wall_points_per_cell: int = 3  # camera: wall points one frame must put in a cell to count (laser: 1)
-    free_margin: float = 0.1  # m, rays stop this short of the obstacle they hit
-    azimuth_bin_deg: float = 0.5  # camera free space: one ray per azimuth bin
-    crop_margin: float = 0.5  # m, observation is cropped to the known cells plus this margin
-    trajectory_length: int = 10000  # plane poses kept (bounded memory)
+    resolution: float = Field(0.05, ge=0.01, le=1)  # m per cell
+    window_radius: float = Field(15.0, gt=0, le=100)  # m, cells farther than this from the sensor are dropped
+    recenter_distance: float = Field(1.0, ge=0, le=100)  # m, the grid scrolls when the sensor leaves this box around its centre
+    logodds_hit: float = Field(0.85, gt=0, le=100)  # added to a cell holding an obstacle point (once per frame)
+    logodds_free: float = Field(-0.4, ge=-100, lt=0)  # added to a cell crossed by a ray (once per frame)
+    logodds_min: float = Field(-2.0, ge=-100, lt=0)  # clamp, so old evidence can be overturned
+    logodds_max: float = Field(3.5, gt=0, le=100)
+    free_threshold: float = Field(-0.3, ge=-100, le=100)  # log-odds below this: observed free space
+    occupied_threshold: float = Field(0.0, ge=-100, le=100)  # log-odds above this: occupied
+    wall_min_observations: int = Field(1, ge=1, le=1000)  # frames that saw wall evidence in a cell before it is a wall point
+    wall_min_ratio: float = Field(0.5, ge=0, le=1)  # ...and at least this fraction of the frames that hit the cell
+    min_wall_points_per_cell: int = Field(3, ge=1, le=10_000)  # camera: wall points one frame must put in a cell to count (laser: 1)
+    free_margin: float = Field(0.1, ge=0, le=10)  # m, rays stop this short of the obstacle they hit
+    azimuth_bin_deg: float = Field(0.5, ge=0.01, le=45)  # camera free space: one ray per azimuth bin
+    crop_margin: float = Field(0.5, ge=0, le=100)  # m, observation is cropped to the known cells plus this margin
+    trajectory_length: int = Field(10000, ge=1, le=1_000_000)  # plane poses kept (bounded memory)
+
+    _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
+
+    @model_validator(mode="after")
+    def _bounded_grid(self):
+        # the grid is a square of side 2 (window_radius + recenter_distance) / resolution
+        # cells, 8 bytes each: at most MAX_BEV_HALF_CELLS per half side (4000^2 cells, 128 MB)
+        half = (self.window_radius + self.recenter_distance) / self.resolution
+        if half > MAX_BEV_HALF_CELLS:
+            raise section_rule_error(
+                "window_radius", self.window_radius,
+                f"the grid would be {int(2 * half)} cells wide, at most {2 * MAX_BEV_HALF_CELLS}: "
+                "(window_radius + recenter_distance) / resolution must stay below " + str(MAX_BEV_HALF_CELLS),
+                ("window_radius", "recenter_distance", "resolution"),
+            )
+        return self
 
 
 class TrackingSettings(Section):
     """Filter bank over the alignment, state anchored at the sensor (see tracking.py)."""
 
     # random-walk drift per round: variance grows with frames elapsed and metres travelled
-    process_translation_std_per_frame: float = 0.01  # m per sqrt(frame), implied sensor position
-    process_angle_deg_per_frame: float = 0.1  # deg per sqrt(frame)
-    process_log_scale_per_frame: float = 0.001  # per sqrt(frame)
-    process_translation_std_per_m: float = 0.05  # m per sqrt(m travelled)
-    process_angle_deg_per_m: float = 1.0  # deg per sqrt(m travelled)
-    process_log_scale_per_m: float = 0.01  # per sqrt(m travelled)
+    process_translation_std_per_frame: float = Field(0.01, ge=0, le=100)  # m per sqrt(frame), implied sensor position
+    process_angle_deg_per_frame: float = Field(0.1, ge=0, le=180)  # deg per sqrt(frame)
+    process_log_scale_per_frame: float = Field(0.001, ge=0, le=10)  # per sqrt(frame)
+    process_translation_std_per_m: float = Field(0.05, ge=0, le=100)  # m per sqrt(m travelled)
+    process_angle_deg_per_m: float = Field(1.0, ge=0, le=180)  # deg per sqrt(m travelled)
+    process_log_scale_per_m: float = Field(0.01, ge=0, le=10)  # per sqrt(m travelled)
     # one refined RANSAC hypothesis, expressed at the sensor (also a new mode's covariance)
-    measurement_translation_std: float = 0.15  # m
-    measurement_angle_deg: float = 2.0
-    measurement_log_scale: float = 0.02
-    gate_chi2: float = 13.28  # Mahalanobis^2 gate, chi2(4 dof) at 99%
+    measurement_translation_std: float = Field(0.15, gt=0, le=100)  # m
+    measurement_angle_deg: float = Field(2.0, gt=0, le=180)
+    measurement_log_scale: float = Field(0.02, gt=0, le=10)
+    gate_chi2: float = Field(13.28, gt=0, le=1e6)  # Mahalanobis^2 gate, chi2(4 dof) at 99%
     # weights = softmax(weight_gain * running score); running score = EMA of fresh scores.
     # Every decision below compares modes with each other or with the round's best
     # hypothesis: score levels differ between map styles (0.8+ on clean plans, -0.5..0.45
     # on maps built from other passes), score differences mean the same everywhere.
-    score_smoothing: float = 0.3  # EMA factor of a fresh score
-    unobserved_penalty: float = 0.5  # a mode nothing matched this round: fresh = running score - this
-    weight_gain: float = 15.0
+    score_smoothing: float = Field(0.3, ge=0, le=1)  # EMA factor of a fresh score
+    unobserved_penalty: float = Field(0.5, ge=0, le=10)  # a mode nothing matched this round: fresh = running score - this
+    weight_gain: float = Field(15.0, ge=0, le=1000)
     # births, pruning, merging
-    birth_score_gap: float = 0.15  # an unmatched hypothesis within this of the round's best starts a mode (the best always does)
-    prune_weight: float = 0.001
-    max_modes: int = 8
-    merge_translation: float = 0.3  # m, implied sensor positions closer than this...
-    merge_angle_deg: float = 5.0  # ...and headings closer than this...
-    merge_log_scale: float = 0.05  # ...and log scales closer than this: one mode
+    birth_score_gap: float = Field(0.15, ge=0, le=10)  # an unmatched hypothesis within this of the round's best starts a mode (the best always does)
+    prune_weight: float = Field(0.001, ge=0, lt=1)
+    max_modes: int = Field(8, ge=1, le=1000)
+    merge_translation: float = Field(0.3, ge=0, le=100)  # m, implied sensor positions closer than this...
+    merge_angle_deg: float = Field(5.0, ge=0, le=180)  # ...and headings closer than this...
+    merge_log_scale: float = Field(0.05, ge=0, le=10)  # ...and log scales closer than this: one mode
     # status
-    confirm_rounds: int = 2  # rounds a mode was found near the top (within birth_score_gap) before it can be tracked
-    ambiguity_ratio: float = 0.5  # a second confirmed mode with weight >= this * best: ambiguous
-    lost_score_gap: float = 0.1  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
-    lost_rounds: int = 3  # ...this many rounds in a row: lost (the rival, if any, takes over)
-    confident_rounds: int = 5  # rounds of tracking one mode before confidently_tracking
+    confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within birth_score_gap) before it can be tracked
+    ambiguity_ratio: float = Field(0.5, gt=0, le=1)  # a second confirmed mode with weight >= this * best: ambiguous
+    lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
+    lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)
+    confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
 
 
 class LocalizerSettings(Section):
-    every_k_frames: int = 5  # a RANSAC round every k fused frames
-    min_wall_points: int = 100  # BEV wall cells needed before the first round
-    min_primitives: int = 3  # lines + circles needed before the first round
+    every_k_frames: int = Field(5, ge=1, le=10_000)  # a RANSAC round every k fused frames
+    min_wall_points: int = Field(100, ge=1, le=10_000_000)  # BEV wall cells needed before the first round
+    min_primitives: int = Field(3, ge=1, le=1000)  # lines + circles needed before the first round
     # Per-frame consistency monitor: while tracking, each fused frame's wall points are
     # checked against the tracked alignment. A run of frames the map does not explain is
     # either a part of the building the floorplan lacks (the frames agree with the BEV)
     # or an odometry jump (the frames contradict the BEV: walls on cells seen as free).
     # The first only asks the next round for a global search; the second clears the BEV
     # and reports lost, since everything fused before the jump is misplaced.
-    monitor_distance: float = 0.3  # m, a wall point within this of a floorplan wall is consistent
-    monitor_min_consistency: float = 0.05  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
-    monitor_min_points: int = 30  # frames with fewer wall points are not judged
-    monitor_max_points: int = 400  # wall points checked per frame (subsampled)
-    monitor_frames: int = 4  # consecutive inconsistent frames before acting
-    monitor_contradiction: float = 0.2  # a frame with this share of its hits on cells the BEV held as free contradicts it
+    monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
+    monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
+    monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
+    monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
+    monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before acting
+    monitor_contradiction: float = Field(0.2, ge=0, le=1)  # a frame with this share of its hits on cells the BEV held as free contradicts it
+
+    _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
 
 
 class LoggingSettings(Section):
@@ -273,15 +334,17 @@ class LoggingSettings(Section):
     how files from other tools are read. Never affects the estimates."""
 
     compression: Literal["zstd", "lz4", "none"] = "zstd"  # per-chunk compression
-    chunk_size: int = 1048576  # bytes; a chunk is closed once its records exceed this...
-    chunk_max_frames: int = 10  # ...or after this many frames: bounds what a crash loses
-    bev_every_n_frames: int = 10  # publish /zfloc/bev every n frames (0 = never)
+    chunk_size: int = Field(1048576, ge=1024, le=1 << 30)  # bytes; a chunk is closed once its records exceed this...
+    chunk_max_frames: int = Field(10, ge=1, le=1_000_000)  # ...or after this many frames: bounds what a crash loses
+    bev_every_n_frames: int = Field(10, ge=0, le=1_000_000)  # publish /zfloc/bev every n frames (0 = never)
     background: bool = True  # compress + write on a worker thread (the caller only serializes)
-    max_pending_batches: int = 4  # batches (2 per frame) queued for the worker; a crash loses them too
-    foreign_scan_range_min: float = 0.01  # m, LaserScan without zfloc range metadata
-    foreign_scan_range_max: float = 100.0  # m
-    success_distance: float = 1.0  # m, replay summary: SR@1m as in the paper...
-    success_last_frames: int = 10  # ...every one of the final frames within the distance
+    max_pending_batches: int = Field(4, ge=1, le=10_000)  # batches (2 per frame) queued for the worker; a crash loses them too
+    foreign_scan_range_min: float = Field(0.01, ge=0, le=1000)  # m, LaserScan without zfloc range metadata
+    foreign_scan_range_max: float = Field(100.0, gt=0, le=10_000)  # m
+    success_distance: float = Field(1.0, gt=0, le=1000)  # m, replay summary: SR@1m as in the paper...
+    success_last_frames: int = Field(10, ge=1, le=1_000_000)  # ...every one of the final frames within the distance
+
+    _ordered = ordered(("foreign_scan_range_min", "foreign_scan_range_max"))
 
 
 class OdometrySettings(Section):
@@ -291,48 +354,52 @@ class OdometrySettings(Section):
     # Per step (real wheel odometry / VIO): translation std per axis = noise * step length +
     # translation_floor, heading std = noise * (|turn| + heading_noise_per_m * step length) +
     # heading_floor_deg. noise 0 means the exact relative motion (the floors are off too).
-    noise: float = 0.02  # drift fraction; real-data default (the issue-9 benchmark's model)
-    heading_noise_per_m: float = 0.0  # rad per metre travelled, scaled by noise (heading drift from translation)
-    translation_floor: float = 0.005  # m per axis per step, when noise > 0
-    heading_floor_deg: float = 0.3  # deg per step, when noise > 0
-    origin_extent: float = 50.0  # m, odom origin drawn uniformly in [-extent, extent]^2, heading uniform
+    noise: float = Field(0.02, ge=0, le=1)  # drift fraction; real-data default (the issue-9 benchmark's model)
+    heading_noise_per_m: float = Field(0.0, ge=0, le=10)  # rad per metre travelled, scaled by noise (heading drift from translation)
+    translation_floor: float = Field(0.005, ge=0, le=10)  # m per axis per step, when noise > 0
+    heading_floor_deg: float = Field(0.3, ge=0, le=90)  # deg per step, when noise > 0
+    origin_extent: float = Field(50.0, ge=0, le=100_000)  # m, odom origin drawn uniformly in [-extent, extent]^2, heading uniform
 
 
 class GibsonSettings(Section):
     """Gibson(t) (F3Loc release): 40 z-depths per frame become a small synthetic depth image.
     Camera and wall heights are not in the data; these are assumptions (documented in gibson.py)."""
 
-    image_rows: int = 30  # synthesised rows for 40 columns (the 640x480 camera's aspect)
-    focal_fraction: float = 0.375  # fx / image width (F3Loc's F_W): ~106 deg horizontal fov
-    camera_height: float = 1.0  # m above the floor (assumed)
-    wall_height: float = 2.6  # m, floor to ceiling (assumed)
-    map_resolution: float = 0.01  # m per map.png pixel
-    split: str = "test"  # split.yaml entry used when a spec names none
+    image_rows: int = Field(30, ge=1, le=10_000)  # synthesised rows for 40 columns (the 640x480 camera's aspect)
+    focal_fraction: float = Field(0.375, gt=0, le=10)  # fx / image width (F3Loc's F_W): ~106 deg horizontal fov
+    camera_height: float = Field(1.0, gt=0, le=10)  # m above the floor (assumed)
+    wall_height: float = Field(2.6, gt=0, le=20)  # m, floor to ceiling (assumed)
+    map_resolution: float = Field(0.01, ge=0.001, le=1)  # m per map.png pixel
+    split: str = Field("test", min_length=1)  # split.yaml entry used when a spec names none
+
+    _ordered = ordered(("camera_height", "wall_height"))
 
 
 class CarmenSettings(Section):
-    flaser_fov_deg: float = 180.0  # FLASER: n beams spread over this...
-    flaser_start_deg: float = -90.0  # ...starting here (counter-clockwise from forward)
-    max_range: float = 80.0  # m, FLASER readings at or beyond this are no-returns (SICK reports 81.83)
-    min_range: float = 0.01  # m, shorter readings are no-returns
-    heldout_margin: int = 25  # scans: a study window's map leaves out [start - margin, stop + margin)
+    flaser_fov_deg: float = Field(180.0, gt=0, le=360)  # FLASER: n beams spread over this...
+    flaser_start_deg: float = Field(-90.0, ge=-360, le=360)  # ...starting here (counter-clockwise from forward)
+    max_range: float = Field(80.0, gt=0, le=1000)  # m, FLASER readings at or beyond this are no-returns (SICK reports 81.83)
+    min_range: float = Field(0.01, ge=0, le=100)  # m, shorter readings are no-returns
+    heldout_margin: int = Field(25, ge=0, le=1_000_000)  # scans: a study window's map leaves out [start - margin, stop + margin)
+
+    _ordered = ordered(("min_range", "max_range"))
 
 
 class MappingSettings(Section):
     """map-from-log: log-odds occupancy from scans with known poses."""
 
-    resolution: float = 0.05  # m per cell
-    logodds_hit: float = 0.85  # added to a cell holding a beam end (once per scan)
-    logodds_free: float = -0.4  # added to a cell crossed by a beam (once per scan)
-    occupied_threshold: float = 0.0  # log-odds above this: wall (more hit evidence than free)
-    free_range: float = 15.0  # m, beams (and no-returns) clear free space up to this range
-    free_margin: float = 0.1  # m, a beam clears free space only up to this short of its return
-    padding: float = 1.0  # m of unknown margin around the mapped area
+    resolution: float = Field(0.05, ge=0.01, le=10)  # m per cell
+    logodds_hit: float = Field(0.85, gt=0, le=100)  # added to a cell holding a beam end (once per scan)
+    logodds_free: float = Field(-0.4, ge=-100, lt=0)  # added to a cell crossed by a beam (once per scan)
+    occupied_threshold: float = Field(0.0, ge=-100, le=100)  # log-odds above this: wall (more hit evidence than free)
+    free_range: float = Field(15.0, gt=0, le=1000)  # m, beams (and no-returns) clear free space up to this range
+    free_margin: float = Field(0.1, ge=0, le=10)  # m, a beam clears free space only up to this short of its return
+    padding: float = Field(1.0, ge=0, le=1000)  # m of unknown margin around the mapped area
 
 
 class SimDatasetSettings(Section):
-    n_frames: int = 300  # frames simulated per built-in scene
-    scene_seed: int = 0  # building layout (the walk and noise follow settings.seed)
+    n_frames: int = Field(300, ge=1, le=1_000_000)  # frames simulated per built-in scene
+    scene_seed: int = Field(0, ge=0, le=2**63 - 1)  # building layout (the walk and noise follow settings.seed)
 
 
 class Ros2Settings(Section):
@@ -365,14 +432,23 @@ class DatasetSettings(Section):
 class StudySettings(Section):
     """SR-vs-length studies (F3Loc protocol)."""
 
-    eval_frames: int = 10  # success/RMSE look at this many final frames of a chunk
-    thresholds: list[float] = [1.0, 0.5]  # m, success thresholds reported (<= counts as success)
-    max_chunks_per_sequence: int = 20  # consecutive non-overlapping chunks kept per sequence and length
-    connect_timeout_s: float = 10.0  # s, waiting for a remote dask scheduler (--scheduler)
+    eval_frames: int = Field(10, ge=1, le=1_000_000)  # success/RMSE look at this many final frames of a chunk
+    thresholds: list[Annotated[float, Field(gt=0, le=1000)]] = Field([1.0, 0.5], min_length=1)  # m, success thresholds reported (<= counts as success)
+    max_chunks_per_sequence: int = Field(20, ge=1, le=1_000_000)  # consecutive non-overlapping chunks kept per sequence and length
+    connect_timeout_s: float = Field(10.0, gt=0, le=86_400)  # s, waiting for a remote dask scheduler (--scheduler)
+
+
+class ReplaySettings(Section):
+    """zfloc-replay --check: decisions (statuses, modes, hypothesis counts, skips) must
+    match exactly; numbers within atol + rtol * max(|logged|, |replayed|), because another
+    CPU or BLAS may change their last bits (--exact: bit for bit). Never affects the estimates."""
+
+    rtol: float = Field(1e-9, ge=0, le=1)  # relative tolerance on logged numbers
+    atol: float = Field(1e-12, ge=0, le=1)  # absolute tolerance (numbers near zero)
 
 
 class Settings(Section):
-    seed: int = 0
+    seed: int = Field(0, ge=0, le=2**63 - 1)
     floorplan: FloorplanSettings = FloorplanSettings()
     primitives: PrimitiveSettings = PrimitiveSettings()
     estimator: EstimatorSettings = EstimatorSettings()
@@ -383,6 +459,7 @@ class Settings(Section):
     logging: LoggingSettings = LoggingSettings()
     datasets: DatasetSettings = DatasetSettings()
     study: StudySettings = StudySettings()
+    replay: ReplaySettings = ReplaySettings()
 
 
 def _merge(base: dict, update: dict) -> dict:
@@ -402,12 +479,60 @@ def _dotted_to_nested(key: str, value) -> dict:
     return out
 
 
+def _field_info(model: type[BaseModel], loc: tuple) -> Any:
+    """The FieldInfo a validation error location points to (None past a list index)."""
+    info = None
+    for part in loc:
+        if not isinstance(part, str) or model is None or part not in model.model_fields:
+            return None
+        info = model.model_fields[part]
+        model = info.annotation if isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel) else None
+    return info
+
+
+def allowed_range(info) -> str | None:
+    """'(0, 10]', '[1, 1000] (integer)', 'at least 1 item'... from a field's constraints."""
+    if info is None:
+        return None
+    c = {type(m).__name__: m for m in info.metadata}
+    lo = ("(", c["Gt"].gt) if "Gt" in c else ("[", c["Ge"].ge) if "Ge" in c else None
+    hi = (")", c["Lt"].lt) if "Lt" in c else ("]", c["Le"].le) if "Le" in c else None
+    if lo and hi:
+        text = f"{lo[0]}{_bound(lo[1])}, {_bound(hi[1])}{hi[0]}"
+    elif lo:
+        text = f"{'>' if lo[0] == '(' else '>='} {_bound(lo[1])}"
+    elif hi:
+        text = f"{'<' if hi[0] == ')' else '<='} {_bound(hi[1])}"
+    elif "MinLen" in c:
+        return f"at least {c['MinLen'].min_length} item(s)"
+    else:
+        return None
+    return text + (" (integer)" if info.annotation is int else "")
+
+
+def _bound(v: float) -> str:
+    return str(v) if isinstance(v, int) else f"{v:.10g}"
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _format_validation_error(err: ValidationError, source: str) -> str:
     first = err.errors()[0]
-    loc = ".".join(str(p) for p in first["loc"]) or "<root>"
+    parts = tuple(first["loc"])
+    loc = ".".join(str(p) for p in parts) or "<root>"
     if first["type"] == "extra_forbidden":
         return f"{source}: unknown setting '{loc}'"
-    return f"{source}: setting '{loc}': {first['msg']}"
+    if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
+        ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
+        message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), first["msg"])
+        return f"{source}: setting '{prefix}{ctx['key']}' = {_short(ctx['value'])}: {message}"
+    info = _field_info(Settings, parts)
+    allowed = allowed_range(info)
+    text = f"{source}: setting '{loc}' = {_short(first.get('input'))}: {first['msg']}"
+    return text + (f"; allowed range {allowed}" if allowed else "")
 
 
 def settings_from_dict(data: dict, source: str = "settings") -> Settings:

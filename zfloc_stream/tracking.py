@@ -38,6 +38,7 @@ from .config import TrackingSettings
 from .errors import InputError
 from .estimate import Alternative, Status
 from .sim2 import Sim2, wrap_angle
+from .ties import tie_key
 
 
 class HypothesisLike(Protocol):
@@ -157,7 +158,7 @@ class HypothesisTracker:
         if not self._bev_ready:
             self._status = "initializing"
             return
-        order = sorted(range(len(hypotheses)), key=lambda j: -float(hypotheses[j].score))
+        order = sorted(range(len(hypotheses)), key=lambda j: -tie_key(hypotheses[j].score))
         hyps = [hypotheses[j] for j in order]
         scores = np.array([float(h.score) for h in hyps])
         meas = [anchored_state(h.alignment, sensor) for h in hyps]
@@ -273,7 +274,7 @@ class HypothesisTracker:
         s = self.settings
         limits = np.array([s.merge_translation, np.deg2rad(s.merge_angle_deg), s.merge_log_scale])
         keep: list[Mode] = []
-        for mode in sorted(self.modes, key=lambda m: (-m.running_score, m.id)):
+        for mode in sorted(self.modes, key=lambda m: (-tie_key(m.running_score), m.id)):
             x = mode.kf.x.ravel()
             twin = None
             for kept in keep:
@@ -295,7 +296,7 @@ class HypothesisTracker:
     def _reweight_and_prune(self) -> None:
         s = self.settings
         self._normalise()
-        by_weight = sorted(self.modes, key=lambda m: (-m.weight, m.id))
+        by_weight = sorted(self.modes, key=lambda m: (-tie_key(m.weight), m.id))
         self.modes = sorted(
             [m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight], key=lambda m: m.id
         )
@@ -382,7 +383,7 @@ class HypothesisTracker:
         if not self.modes:
             return None
         confirmed = [m for m in self.modes if m.hits >= self.settings.confirm_rounds]
-        heaviest = max(confirmed or self.modes, key=lambda m: (m.weight, -m.id))
+        heaviest = max(confirmed or self.modes, key=lambda m: (tie_key(m.weight), -m.id))
         tracked = self._mode_by_id(self._tracked_id)
         if tracked is not None and heaviest is not tracked and heaviest.hits < self.settings.lost_rounds:
             return tracked
@@ -391,11 +392,11 @@ class HypothesisTracker:
     def alternatives(self) -> list[Mode]:
         """Every live mode except best, heaviest first."""
         best = self.best
-        return sorted((m for m in self.modes if m is not best), key=lambda m: (-m.weight, m.id))
+        return sorted((m for m in self.modes if m is not best), key=lambda m: (-tie_key(m.weight), m.id))
 
     def warm_start(self) -> list[Sim2]:
         """Alignments of the live modes, heaviest first, for the next round to refine first."""
-        return [m.alignment for m in sorted(self.modes, key=lambda m: (-m.weight, m.id))]
+        return [m.alignment for m in sorted(self.modes, key=lambda m: (-tie_key(m.weight), m.id))]
 
     def estimate_alternatives(self, sensor_xy, yaw: float) -> tuple[Alternative, ...]:
         """Every live mode (best first) as estimate.Alternative at the given odometry pose."""

@@ -52,6 +52,7 @@ from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2
 from .correlative import correlative_models
+from ..ties import descending, tie_keys
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
@@ -547,12 +548,12 @@ def localize(
         field = floorplan_scorer(floorplan, cfg.scoring).face_field
         refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
         rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
-        better = rescored.total >= total[:n_refine]  # keep a refinement only if it does not hurt C
+        better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
         total[:n_refine][better] = rescored.total[better]
         cc[:n_refine][better] = rescored.consistency[better]
         cv[:n_refine][better] = rescored.violation[better]
-    order = np.argsort(-total, kind="stable")
+    order = descending(total)
     keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
     t3 = time.perf_counter()
 

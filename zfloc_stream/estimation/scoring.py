@@ -37,6 +37,7 @@ from ..config import ScoringSettings
 from ..geometry import LineSet
 from ..observation import BevObservation
 from ..sim2 import wrap_angle
+from ..ties import descending
 
 # --------------------------------------------------------------------------------------
 # transforms
@@ -417,8 +418,8 @@ def rank_coarse_to_fine(
     scorer = floorplan_scorer(floorplan, settings)
     points = sparse_points if len(sparse_points) else bev.wall_points
     coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
-    order = np.argsort(-coarse, kind="stable")
+    order = descending(coarse)
     top = order[distinct(models[order], anchor, settings, settings.top_k)]
     scores = score_hypotheses(floorplan, bev, models[top], settings)
-    best = np.argsort(-scores.total, kind="stable")
+    best = descending(scores.total)
     return Ranking(top[best], Scores(scores.total[best], scores.consistency[best], scores.violation[best]), coarse)

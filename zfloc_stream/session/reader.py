@@ -135,6 +135,11 @@ class Session:
         return self.metadata.get(S.METADATA_SESSION, {})
 
     @property
+    def environment(self) -> dict[str, str] | None:
+        """Where the session was recorded (session/environment.py); None if not logged."""
+        return self.metadata.get(S.METADATA_ENVIRONMENT)
+
+    @property
     def floorplan_files(self) -> dict[str, bytes]:
         n = len(S.ATTACHMENT_FLOORPLAN_PREFIX)
         return {k[n:]: v for k, v in self.attachments.items() if k.startswith(S.ATTACHMENT_FLOORPLAN_PREFIX)}

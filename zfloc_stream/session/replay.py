@@ -2,8 +2,11 @@
 
 With check=True every logged output (pose, hypotheses, BEV grid, status without its
 timings) is compared with the re-run, frame by frame; the first difference is returned as
-a Divergence. The localizer is deterministic, so a session replayed with its own settings
-must match bit for bit.
+a Divergence. Decisions (statuses, modes, hypothesis counts, skips) must match exactly and
+numbers within a Tolerance (compare.py); Tolerance.exact compares bit for bit. The
+localizer is deterministic: on the recording machine a session replayed with its own
+settings matches bit for bit; on another CPU or BLAS the last bits of numbers may differ,
+the decisions may not.
 
 Frame range: frames start <= index < stop. With check=True the engine first runs through
 frames 0..start-1 unchecked (its state at `start` must be the logged one); without check
@@ -12,7 +15,6 @@ a fresh engine starts at `start` (to study a segment on its own).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,20 +25,9 @@ from ..config import Settings, load_settings
 from ..errors import SessionLogError
 from ..estimate import Estimate
 from . import schemas as S
+from .compare import EXACT, Comparison, Deviation, Divergence, Tolerance, comparable_grid, comparable_status
 from .reader import FrameRecord, LoggedOutputs, Session
 from .writer import SessionWriter, bev_grid_of
-
-
-@dataclass(frozen=True)
-class Divergence:
-    frame: int
-    topic: str
-    field: str
-    logged: object
-    replayed: object
-
-    def __str__(self) -> str:
-        return f"frame {self.frame}, {self.topic}: {self.field}: logged {self.logged!r}, replay {self.replayed!r}"
 
 
 @dataclass
@@ -63,6 +54,8 @@ class ReplayResult:
     logged: RunSummary
     replayed: RunSummary
     out: Path | None = None
+    tolerance: Tolerance = EXACT
+    deviations: dict[str, Deviation] = field(default_factory=dict)  # per topic, with check=True
 
 
 # --- settings -------------------------------------------------------------------------------
@@ -74,87 +67,23 @@ def replay_settings(session: Session, config: str | Path | None = None, override
 
 
 # --- comparison -----------------------------------------------------------------------------
-def _is_repeated(desc) -> bool:
-    # protobuf >= 5 spells it is_repeated; older releases only have label
-    flag = getattr(desc, "is_repeated", None)
-    return bool(flag) if flag is not None else desc.label == desc.LABEL_REPEATED
-
-
-def _flatten(value, prefix: str = "") -> dict[str, object]:
-    """Nested protobuf messages / dicts / lists as {dotted.path: leaf}."""
-    if hasattr(value, "ListFields"):
-        out: dict[str, object] = {}
-        for desc in value.DESCRIPTOR.fields:  # every field, set or not: a missing one is 0
-            v = getattr(value, desc.name)
-            key = f"{prefix}{desc.name}"
-            if _is_repeated(desc):
-                out[key + ".len"] = len(v)
-                for i, item in enumerate(v):
-                    out.update(_flatten(item, f"{key}[{i}]."))
-            elif desc.message_type is not None:
-                out.update(_flatten(v, key + "."))
-            else:
-                out[key] = v
-        return out
-    if isinstance(value, dict):
-        out = {}
-        for k in sorted(value):
-            out.update(_flatten(value[k], f"{prefix}{k}."))
-        return out
-    if isinstance(value, list):
-        out = {f"{prefix}len": len(value)}
-        for i, item in enumerate(value):
-            out.update(_flatten(item, f"{prefix}[{i}]."))
-        return out
-    return {prefix.rstrip("."): value}
-
-
-def _first_difference(logged, replayed) -> tuple[str, object, object] | None:
-    a, b = _flatten(logged), _flatten(replayed)
-    for key in sorted(a.keys() | b.keys()):
-        va, vb = a.get(key, "<absent>"), b.get(key, "<absent>")
-        if isinstance(va, bytes) or isinstance(vb, bytes):
-            if va != vb:
-                return key, _describe_bytes(va), _describe_bytes(vb)
-        elif type(va) is not type(vb) or va != vb:
-            if not (isinstance(va, float) and isinstance(vb, float) and np.isnan(va) and np.isnan(vb)):
-                return key, va, vb
-    return None
-
-
-def _describe_bytes(v) -> str:
-    return f"<{len(v)} bytes>" if isinstance(v, bytes) else repr(v)
-
-
-def _comparable_status(status: dict) -> dict:
-    # timings are wall-clock measurements; the JSON round trip makes both sides alike
-    return {k: v for k, v in json.loads(S.encode_status(status)).items() if k not in S.MEASURED_STATUS_KEYS}
-
-
-def compare_outputs(index: int, ns: int, logged: LoggedOutputs, est: Estimate, bev_source, settings: Settings) -> Divergence | None:
-    """The first difference between what was logged for a frame and the re-run."""
-    diff = _first_difference(_comparable_status(logged.status), _comparable_status(S.status_to_json(est)))
-    if diff is not None:
-        return Divergence(index, S.TOPIC_STATUS, *diff)
+def compare_outputs(comparison: Comparison, index: int, ns: int, logged: LoggedOutputs, est: Estimate, bev_source) -> Divergence | None:
+    """The first difference between what was logged for a frame and the re-run (see
+    compare.py: decisions exactly, numbers within comparison.tolerance)."""
+    pairs: list[tuple[str, object, object]] = [(S.TOPIC_STATUS, comparable_status(logged.status), comparable_status(S.status_to_json(est)))]
     replay_pose = None if est.pose is None else S.estimate_pose_to_msg(est, ns)
     if (logged.pose is None) != (replay_pose is None):
         return Divergence(index, S.TOPIC_POSE, "present", logged.pose is not None, replay_pose is not None)
     if replay_pose is not None:
-        diff = _first_difference(logged.pose, replay_pose)
-        if diff is not None:
-            return Divergence(index, S.TOPIC_POSE, *diff)
+        pairs.append((S.TOPIC_POSE, logged.pose, replay_pose))
     if logged.hypotheses is not None:
-        diff = _first_difference(logged.hypotheses, S.hypotheses_to_msg(est, ns))
-        if diff is not None:
-            return Divergence(index, S.TOPIC_HYPOTHESES, *diff)
+        pairs.append((S.TOPIC_HYPOTHESES, logged.hypotheses, S.hypotheses_to_msg(est, ns)))
     if logged.bev is not None:
         grid = bev_grid_of(bev_source)
         if grid is None:
             return Divergence(index, S.TOPIC_BEV, "present", True, False)
-        diff = _first_difference(logged.bev, S.grid_to_msg(grid, ns))
-        if diff is not None:
-            return Divergence(index, S.TOPIC_BEV, *diff)
-    return None
+        pairs.append((S.TOPIC_BEV, comparable_grid(S.grid_from_msg(logged.bev)), comparable_grid(grid)))
+    return comparison.frame(index, pairs)
 
 
 # --- summaries ------------------------------------------------------------------------------
@@ -198,6 +127,7 @@ def replay_session(
     check: bool = False,
     out: str | Path | None = None,
     on_frame: Callable[[int], None] | None = None,
+    tolerance: Tolerance = EXACT,
 ) -> ReplayResult:
     """Re-run the localizer on frames start <= index < stop (see the module docstring)."""
     from ..localizer import Localizer  # the engine is only needed here
@@ -217,6 +147,7 @@ def replay_session(
     divergence = None
     checked = 0
     frames = 0
+    comparison = Comparison(tolerance)
     try:
         for rec in session.records(0 if check else start, stop):
             in_range = rec.index >= start
@@ -231,7 +162,7 @@ def replay_session(
             truth.append(rec.frame.ground_truth)
             if check and rec.outputs.status is not None:
                 checked += 1
-                divergence = compare_outputs(rec.index, rec.stamp_ns, rec.outputs, est, localizer, settings)
+                divergence = compare_outputs(comparison, rec.index, rec.stamp_ns, rec.outputs, est, localizer)
                 if divergence is not None:
                     break
     finally:
@@ -249,6 +180,8 @@ def replay_session(
         logged=summarize_run(logged, truth, session.settings or settings),
         replayed=summarize_run(estimates, truth, settings),
         out=None if out is None else Path(out),
+        tolerance=tolerance,
+        deviations=comparison.deviations,
     )
 
 

@@ -63,6 +63,7 @@ METADATA_SETTINGS = "zfloc/settings"  # {"yaml": dump_settings(...)}
 METADATA_SESSION = "zfloc/session"  # {"format": ..., "sensor": ..., user keys}
 METADATA_FLOORPLAN_SETTINGS = "zfloc/floorplan_settings"  # {"yaml", "crc32"} where they differ
 METADATA_CHECKSUMS = "zfloc/checksums"  # {attachment name: crc32 hex}
+METADATA_ENVIRONMENT = "zfloc/environment"  # where it was recorded: versions, BLAS, SIMD, CPU (environment.py)
 CRC_KEY = "crc32"  # in METADATA_SETTINGS: crc32 hex of the YAML text
 ATTACHMENT_FLOORPLAN_PREFIX = "floorplan/"
 SESSION_FORMAT = "zfloc-session/1"

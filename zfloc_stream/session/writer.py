@@ -34,6 +34,7 @@ from ..config import Settings, dump_settings
 from ..errors import SessionLogError
 from ..estimate import Estimate
 from ..frames import CameraFrame, LaserFrame
+from . import environment
 from . import schemas as S
 from .assemble import laser_frame_from_msgs
 from .sink import Record, RecordSink
@@ -120,6 +121,7 @@ class SessionWriter:
         info = {"format": S.SESSION_FORMAT, "writer": f"zfloc-stream/{__version__}"}
         info.update({str(k): str(v) for k, v in (metadata or {}).items()})
         self._mcap.add_metadata(S.METADATA_SESSION, info)
+        self._mcap.add_metadata(S.METADATA_ENVIRONMENT, environment.current())  # replays elsewhere say so
         self._floorplan_to_draw = floorplan  # published as a Grid with the first frame
         if floorplan is not None:
             self._attach_floorplan(floorplan)

@@ -1,7 +1,8 @@
 """`zfloc-replay`: re-run the localizer on a session file's logged inputs.
 
-Exit codes: 0 done (with --check: every logged output identical), 1 a divergence,
-2 bad input (one line on stderr, never a traceback).
+Exit codes: 0 done (with --check: every decision identical and every number within the
+tolerance; with --exact: bit for bit), 1 a divergence, 2 bad input (one line on stderr,
+never a traceback).
 """
 
 from __future__ import annotations
@@ -15,12 +16,21 @@ from pathlib import Path
 from ..errors import InputError, SessionLogError, ZflocError
 
 EPILOG = """examples:
-  zfloc-replay session.mcap --check               # identical re-run? exit 0, else 1 + first divergence
+  zfloc-replay session.mcap --check               # same decisions, numbers within tolerance? exit 0, else 1 + first divergence
+  zfloc-replay session.mcap --exact               # bit for bit (on the machine that recorded it)
+  zfloc-replay session.mcap --check --set replay.rtol=1e-6   # a looser tolerance
   zfloc-replay session.mcap --check --from 20 --to 40
   zfloc-replay session.mcap --set estimator.ransac.iterations=200 --out fewer-iters.mcap
   zfloc-replay session.mcap --config tuned.yaml   # side-by-side summary, new session in ./session-replay.mcap
   zfloc-replay crashed.mcap --salvage --check     # a file cut off mid-run: replay what its chunks hold
   zfloc-replay other-tool.mcap --floorplan map.yaml --out replayed.mcap
+
+--check compares decisions exactly (frame count, statuses, reported mode and the order of
+the alternatives, number of hypotheses, skipped frames and their reasons, which outputs
+exist) and numbers (poses, covariances, alignments, scores, weights, BEV log-odds) within
+replay.rtol / replay.atol (defaults 1e-9 / 1e-12): another CPU or BLAS may change their last
+bits. It prints the largest deviation per topic, and says when the session was recorded
+in another environment (versions, BLAS, SIMD features, CPU).
 
 The engine runs with the settings logged in the file, updated by --config then --set.
 --from/--to select frames [N, M). With --check the engine first runs unchecked through
@@ -43,7 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("session", type=Path, help="session file (.mcap) written by zfloc-stream or another tool on the same topics")
-    p.add_argument("--check", action="store_true", help="compare every logged output with the re-run; exit 1 at the first divergence")
+    p.add_argument("--check", action="store_true", help="compare every logged output with the re-run: decisions exactly, numbers within "
+                   "replay.rtol/replay.atol; exit 1 at the first divergence")
+    p.add_argument("--exact", action="store_true", help="like --check, but numbers bit for bit (for the machine that recorded the session)")
     p.add_argument("--from", dest="start", type=int, default=0, metavar="N", help="first frame (default 0)")
     p.add_argument("--to", dest="stop", type=int, default=None, metavar="M", help="stop before frame M (default: the end)")
     p.add_argument("--config", type=Path, help="YAML settings applied over the logged settings")
@@ -92,8 +104,13 @@ def run(args) -> int:
     from ..session import read_session
     from ..session.replay import replay_session, replay_settings, require_outputs
 
+    from ..session import environment
+    from ..session.compare import EXACT, Tolerance
+
+    args.check = args.check or args.exact
     session = read_session(args.session, salvage=args.salvage)
     settings = replay_settings(session, args.config, args.set)
+    tolerance = EXACT if args.exact else Tolerance(settings.replay.rtol, settings.replay.atol)
     if args.check:
         require_outputs(session)
     if args.floorplan is not None:
@@ -121,7 +138,7 @@ def run(args) -> int:
     try:
         result = replay_session(
             session, settings, floorplan, start=args.start, stop=args.stop, check=args.check, out=out,
-            on_frame=None if progress is None else (lambda _i: progress.update(1)),
+            on_frame=None if progress is None else (lambda _i: progress.update(1)), tolerance=tolerance,
         )
     finally:
         if progress is not None:
@@ -134,11 +151,19 @@ def run(args) -> int:
 
     last = args.start + result.frames - 1
     if args.check:
+        print(environment.describe(session.environment))
         if result.divergence is not None:
             print(f"DIVERGED at {result.divergence}")
             return 1
-        print(f"identical: {result.checked} frames checked ({args.start}-{last}), "
+        if all(d.abs == 0 for d in result.deviations.values()):
+            verdict = "identical"
+        else:
+            verdict = f"same decisions, numbers within {tolerance}"
+        print(f"{verdict}: {result.checked} frames checked ({args.start}-{last}), "
               "pose, hypotheses, BEV and status (timings excluded) match the log")
+        print("largest deviation per topic:")
+        for topic in sorted(result.deviations):
+            print(f"  {topic}: {result.deviations[topic]}")
     if changed or not args.check:
         print(_summary_table(result, settings.logging.success_distance))
     if result.out is not None:
