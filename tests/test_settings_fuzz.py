@@ -131,7 +131,7 @@ def test_settings_fuzz_wide(tmp_path):
         ("primitives.circles.max_radius=0.05", "setting 'primitives.circles.min_radius' = 0.1: must be less than primitives.circles.max_radius (0.05)"),
         ("frontend.max_obstacle_height=0.05", "frontend.min_obstacle_height' = 0.1: must be less than frontend.max_obstacle_height"),
         ("bev.window_radius=99.5", "setting 'bev.window_radius' = 99.5: the grid would be 4020 cells wide, at most 4000"),
-        ("tracking.birth_ratio=[1]", "setting 'tracking.birth_ratio' = [1]: Input should be a valid number"),
+        ("tracking.birth_score_gap=[1]", "setting 'tracking.birth_score_gap' = [1]: Input should be a valid number"),
         ("study.thresholds=[0.5,-1]", "setting 'study.thresholds.1' = -1: Input should be greater than 0"),
     ],
 )

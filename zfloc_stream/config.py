@@ -315,16 +315,15 @@ class LocalizerSettings(Section):
     min_primitives: int = Field(3, ge=1, le=1000)  # lines + circles needed before the first round
     # Per-frame consistency monitor: while tracking, each fused frame's wall points are
     # checked against the tracked alignment. A run of frames the map does not explain is
-    # either a part of the building the floorplan lacks (the frames agree with the BEV)
-    # or an odometry jump (the frames contradict the BEV: walls on cells seen as free).
-    # The first only asks the next round for a global search; the second clears the BEV
-    # and reports lost, since everything fused before the jump is misplaced.
+    # a part of the building the floorplan lacks, clutter, or an odometry jump; the
+    # monitor cannot tell them apart on real sensors, so it never drops the track or the
+    # BEV: it makes the next round a full global search, and the tracker decides from
+    # relative evidence (a rival that explains the data better) whether the track is lost.
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
     monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
     monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
-    monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before acting
-    monitor_contradiction: float = Field(0.2, ge=0, le=1)  # a frame with this share of its hits on cells the BEV held as free contradicts it
+    monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
 
     _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
 

@@ -38,8 +38,7 @@ class Localizer:
         self.frames_fused = 0
         self.last_result = None  # LocalizationResult of the latest round, for logging
         self.last_observation = None  # BevObservation of the latest round, for overlays
-        self._inconsistent_frames = 0  # consecutive frames the tracked alignment does not explain...
-        self._contradicting_frames = 0  # ...of which contradict the BEV itself
+        self._inconsistent_frames = 0  # consecutive frames the tracked alignment does not explain
         self._force_global = False  # the monitor asks the next round for a full global search
 
     # ------------------------------------------------------------------------------
@@ -108,19 +107,10 @@ class Localizer:
         points = points[:: max(1, len(points) // cfg.monitor_max_points)]
         distances = self.floorplan.distance(self.tracker.best.alignment.apply(points))
         consistent = np.mean(distances < cfg.monitor_distance) >= cfg.monitor_min_consistency
-        if consistent:
-            self._inconsistent_frames = self._contradicting_frames = 0
-            return
-        self._inconsistent_frames += 1
-        self._contradicting_frames += self.bev.last_contradiction >= cfg.monitor_contradiction
-        if self._inconsistent_frames < cfg.monitor_frames:
-            return
-        if 2 * self._contradicting_frames >= self._inconsistent_frames:  # the odometry jumped
-            self.tracker.declare_lost()
-            self.bev.clear_map()
-        else:  # unmapped part of the building: keep the track, search globally next round
+        self._inconsistent_frames = 0 if consistent else self._inconsistent_frames + 1
+        if self._inconsistent_frames >= cfg.monitor_frames:
+            self._inconsistent_frames = 0
             self._force_global = True
-        self._inconsistent_frames = self._contradicting_frames = 0
 
     def _enough_evidence(self, obs) -> bool:
         cfg = self.settings.localizer

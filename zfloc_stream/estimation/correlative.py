@@ -17,8 +17,8 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
+import scipy.fft as sfft
 
 from ..config import RefineSettings
 from ..errors import InputError
@@ -66,6 +66,31 @@ def _near_wall_mask(floorplan, cell: float, tolerance: float) -> tuple[np.ndarra
     return cached[key]
 
 
+@dataclass(frozen=True)
+class _Spectrum:
+    values: np.ndarray  # rfft2 of the padded mask
+    fft_shape: tuple[int, int]
+
+
+def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
+    """The near-wall mask padded by at least `half` zero cells (rounded up to 16 so calls
+    share it), its FFT (cached per floorplan), the padded shape and the world centre of
+    the padded cell (0, 0)."""
+    near, origin = _near_wall_mask(floorplan, cell, tolerance)
+    pad = 16 * int(np.ceil(half / 16))
+    key = ("spectrum", float(cell), float(tolerance), pad)
+    try:
+        cached = _MASKS.setdefault(floorplan, {})
+    except TypeError:
+        cached = {}
+    if key not in cached:
+        mask = np.pad(near, pad)
+        fft_shape = (sfft.next_fast_len(mask.shape[0], real=True), sfft.next_fast_len(mask.shape[1], real=True))
+        cached[key] = (_Spectrum(sfft.rfft2(mask, s=fft_shape), fft_shape), mask.shape)
+    spectrum, shape = cached[key]
+    return spectrum, shape, origin - pad * cell
+
+
 def correlative_models(
     floorplan,
     points: np.ndarray,
@@ -86,19 +111,21 @@ def correlative_models(
     radius = float(np.linalg.norm(local, axis=1).max()) + cell
     half = int(np.ceil(radius / cell)) + 1
     side = 2 * half  # the template: a square of side cells around the points' centre
-    near, origin = _near_wall_mask(floorplan, cell, tolerance + 0.5 * cell)
-    mask = cv2.copyMakeBorder(near, half, half, half, half, cv2.BORDER_CONSTANT, value=0.0)
-    mask_origin = origin - half * cell
+    spectrum, shape, mask_origin = _mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
+    n_i, n_j = shape[0] - side + 1, shape[1] - side + 1  # placements with the template inside the mask
     per_angle = max(1, peaks)
     counts, thetas, corners = [], [], []
     for theta in np.deg2rad(np.arange(0.0, 360.0, angle_step_deg)):
         c, s = np.cos(theta), np.sin(theta)
         rot = local @ np.array([[c, s], [-s, c]])  # R(theta) applied to each row
         ij = np.floor(rot / cell).astype(np.int64) + half
-        template = np.bincount(ij[:, 1] * side + ij[:, 0], minlength=side * side).astype(np.float32).reshape(side, side)
-        score = cv2.matchTemplate(mask, template, cv2.TM_CCORR).ravel()
+        template = np.zeros(spectrum.fft_shape, dtype=np.float32)
+        np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
+        # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
+        score = sfft.irfft2(spectrum.values * np.conj(sfft.rfft2(template)), s=spectrum.fft_shape)[:n_i, :n_j]
+        score = np.round(score).ravel()  # integer counts: FFT round-off never decides a tie
         best = np.argpartition(score, -per_angle)[-per_angle:] if len(score) > per_angle else np.arange(len(score))
-        i, j = np.divmod(best, mask.shape[1] - side + 1)
+        i, j = np.divmod(best, n_j)
         counts.append(score[best])
         thetas.append(np.full(len(best), theta))
         # template cell (half, half) holds the points' centre at its corner; placed at

@@ -127,7 +127,6 @@ class RollingBEV:
         self.frames_fused = 0
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
-        self.last_contradiction = 0.0  # share of the last frame's hits on cells the map held as free
 
     # ------------------------------------------------------------------------------
     # public API
@@ -362,10 +361,6 @@ class RollingBEV:
         self.last_wall_hits = wall_hits  # the localizer checks each frame against the tracked alignment
         g.centre_on(centre, self._slack)
         hit_flat = g.unique_flat(hits)
-        # Share of this frame's hits in cells the map already holds as free: near 0 for a
-        # new room (unknown cells), large when the odometry jumped (walls land on floor).
-        before = g.logodds.reshape(-1)[hit_flat]
-        self.last_contradiction = float(np.mean(before < b.free_threshold)) if len(before) else 0.0
         # free polygon, drawn on a crop around it only
         # (free_ends: (K, 2) polygon vertices ordered by angle around the centre)
         if len(free_ends):
