@@ -14,6 +14,8 @@ EPILOG = """examples:
   zfloc-stream demo --scene office --seed 3 --out /tmp/office
   zfloc-stream run --floorplan map.yaml --input session.mcap --out out/
   zfloc-stream run --floorplan map.yaml --input intel.log.gz --odometry-noise 0.02 --out out/
+  zfloc-stream run --input phone.mcap --depth-model depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf \
+      --seg-model nvidia/segformer-b0-finetuned-ade-512-512 --out out/     # plain RGB camera ([torch] extra)
   zfloc-stream map-from-log intel.log.gz --exclude 375:454 --out held-out-map/
   zfloc-stream config > my.yaml                       # the default settings, to edit
 """
@@ -65,6 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--input", type=Path, required=True, help="session.mcap, a Gibson(t) scene folder, or a Carmen log")
     run.add_argument("--odometry-noise", type=float, default=0.0, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default 0)")
     run.add_argument("--out", type=Path, default=Path("zfloc-run"), help="output folder (default ./zfloc-run)")
+    run.add_argument("--depth-model", metavar="ID_OR_DIR", help="metric depth network for RGB frames: a local folder or a "
+                     "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
+    run.add_argument("--seg-model", metavar="ID_OR_DIR", help="semantic segmentation network for wall/floor/ceiling labels "
+                     "(sets backbones.seg_model; needs the [torch] extra)")
     _add_settings_args(run)
 
     config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
@@ -79,6 +85,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _settings(args):
     return load_settings(args.config, args.set)
+
+
+def _run_settings(args, base_overrides: dict | None = None):
+    """Settings of `run`: defaults, the source's needs, --config, --set, then the
+    --depth-model / --seg-model flags."""
+    settings = load_settings(args.config, args.set, base_overrides=base_overrides)
+    models = {k: v for k, v in (("depth_model", args.depth_model), ("seg_model", args.seg_model)) if v is not None}
+    if not models:
+        return settings
+    return settings.model_copy(update={"backbones": settings.backbones.model_copy(update=models)})
 
 
 def cmd_demo(args) -> int:
@@ -99,20 +115,24 @@ def cmd_demo(args) -> int:
 
 
 def cmd_run(args) -> int:
+    from ..backbones import Perception
     from ..datasets import detect_source
     from ..floorplan import Floorplan
     from .session_runner import run_session
 
-    settings = _settings(args)
+    settings = _run_settings(args)
     floorplan = None
     if args.floorplan is not None:
         floorplan = Floorplan.load(args.floorplan, resolution=args.resolution, origin=args.origin, settings=settings)
     sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed, settings=settings)
     if sequence.settings_overrides:
-        settings = load_settings(args.config, args.set, base_overrides=sequence.settings_overrides)
+        settings = _run_settings(args, sequence.settings_overrides)
+    perception = Perception.from_settings(settings.backbones)  # loads now: a bad model fails before any output
+    if sequence.needs_depth_network and (perception is None or perception.depth is None):
+        raise ZflocError(f"{args.input} holds RGB camera frames without depth: name a depth network with --depth-model ID_OR_DIR")
     outcome = run_session(
         sequence.floorplan, sequence.frames(), settings, args.out, total=sequence.n_frames,
-        progress=not args.no_progress, description=f"run {args.input.name}",
+        progress=not args.no_progress, description=f"run {args.input.name}", perception=perception,
     )
     _report(outcome)
     return 0
