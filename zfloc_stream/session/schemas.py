@@ -151,7 +151,7 @@ def image_to_msg(rgb: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> RawI
 
 def image_from_msg(msg) -> np.ndarray:
     """HxWx3 uint8 in RGB order from a RawImage (rgb8, bgr8) or a CompressedImage (jpeg, png)."""
-    if isinstance(msg, CompressedImage):
+    if msg.DESCRIPTOR.full_name == "foxglove.CompressedImage":  # decoders build their own classes: match by name
         fmt = msg.format.lower().removeprefix("image/")
         if fmt not in COMPRESSED_FORMATS:
             raise SessionLogError(f"compressed image format '{msg.format}' is not supported (expected jpeg or png)")
