@@ -56,7 +56,10 @@ class Localizer:
             timings["backbones"] = time.perf_counter() - t0
             t0 = time.perf_counter()
         if isinstance(frame, CameraFrame) and frame.depth is None:
-            reason = "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
+            if self.perception is not None and self.perception.depth is not None:
+                reason = f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
+            else:
+                reason = "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
             return self._estimate(index, frame.timestamp, None, timings, skipped=reason)
         try:
             self.bev.add(frame)
