@@ -103,19 +103,20 @@ def random_images(n: int, shape=(48, 64), seed: int = 0) -> list[np.ndarray]:
 _PALETTE = np.array([[0, 0, 0], [200, 190, 170], [120, 80, 40], [245, 245, 245], [60, 90, 160]], dtype=float)
 
 
-def rgb_frames(scene: str = "rooms", n: int = 8, seed: int = 0, shape=(60, 80)) -> tuple[list[CameraFrame], object]:
+def rgb_frames(scene: str = "rooms", n: int = 8, seed: int = 0, shape=(60, 80)) -> tuple[list[CameraFrame], object, list[CameraFrame]]:
     """RGB-only camera frames of a simulated walk (colours from the simulator's labels,
-    shaded by its depth) and the scene's floorplan."""
+    shaded by its depth), the scene's floorplan, and the simulator's own frames (depth
+    and labels: what perfect networks would give)."""
     from zfloc_stream.sim import SimSettings, build_scene, simulate
 
     sc = build_scene(scene, seed=seed)
     sim = simulate(sc, SimSettings(height=shape[0], width=shape[1]), seed=seed, n_frames=n)
-    frames = []
-    for f in sim:
+    frames, sim_frames = [], list(sim)
+    for f in sim_frames:
         shade = 1.0 / (1.0 + 0.1 * np.nan_to_num(f.depth))[..., None]
         rgb = np.clip(_PALETTE[f.labels] * (0.5 + 0.5 * shade), 0, 255).astype(np.uint8)
         frames.append(CameraFrame(None, None, f.K, f.T_odom_cam, f.timestamp, f.ground_truth, rgb=rgb))
-    return frames, sc.floorplan
+    return frames, sc.floorplan, sim_frames
 
 
 def write_rgb_session(path: Path, frames, floorplan, settings) -> Path:

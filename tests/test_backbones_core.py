@@ -126,7 +126,7 @@ def _cli_failure(capsys, *args) -> str:
 
 @pytest.fixture(scope="module")
 def rgb_session(tmp_path_factory):
-    frames, plan = rgb_frames("rooms", n=4, shape=(30, 40))
+    frames, plan, _ = rgb_frames("rooms", n=4, shape=(30, 40))
     return write_rgb_session(tmp_path_factory.mktemp("rgb") / "phone.mcap", frames, plan, Settings()), frames
 
 
@@ -294,3 +294,35 @@ def test_localizer_runs_backbones_on_rgb_frames_and_skips_without_them():
     loc = Localizer(plan, Settings(), perception=Perception(depth, None))
     est = loc.push(frames[0])
     assert est.skipped is None and depth.calls == [1] and "backbones" in est.timings
+
+
+class _Oracle:
+    """Perfect networks: the simulator's depth (or labels) of the frame whose image this is."""
+
+    def __init__(self, sim_frames, rgb_frames, attribute):
+        self.name = f"oracle-{attribute}"
+        self.truth = {f.rgb.tobytes(): getattr(s, attribute) for f, s in zip(rgb_frames, sim_frames, strict=True)}
+
+    def predict(self, images):
+        return [self.truth[im.tobytes()] for im in images]
+
+
+def test_rgb_session_localizes_through_run_with_perfect_networks(tmp_path):
+    """The RGB path itself (MCAP colour images -> batched networks -> depth/labels on the
+    camera's pixel grid -> metric-prior localization) loses nothing: with networks that
+    return the simulator's depth and labels, an RGB session localizes like a depth one."""
+    from zfloc_stream.datasets import detect_source
+    from zfloc_stream.tools.session_runner import run_session
+
+    frames, plan, sim_frames = rgb_frames("apartment", n=40, shape=(120, 160))
+    path = write_rgb_session(tmp_path / "phone.mcap", frames, plan, Settings())
+    sequence = detect_source(path)
+    assert sequence.needs_depth_network and sequence.settings_overrides == {"estimator": {"scale_mode": "prior"}}
+    logged = list(sequence.frames())  # as read back from the file
+    perception = Perception(_Oracle(sim_frames, logged, "depth"), _Oracle(sim_frames, logged, "labels"), batch_size=4)
+    settings = Settings.model_validate({"estimator": {"scale_mode": "prior"}})
+    outcome = run_session(sequence.floorplan, sequence.frames(), settings, tmp_path / "out", progress=False, perception=perception)
+    assert all(e.skipped is None for e in outcome.estimates)
+    errors = outcome.final_errors()
+    assert outcome.estimates[-1].status in ("tracking", "ambiguous")
+    assert errors.max() < 1.0, errors

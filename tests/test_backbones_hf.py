@@ -98,7 +98,7 @@ def test_segmentation_codes_follow_names_not_indices(tmp_path, seg_dir):
 
 
 def test_rgb_session_localized_end_to_end_through_run(tmp_path, depth_dir, seg_dir, capsys):
-    frames, floorplan = rgb_frames("rooms", n=6, shape=(60, 80))
+    frames, floorplan, _ = rgb_frames("rooms", n=6, shape=(60, 80))
     session = write_rgb_session(tmp_path / "phone.mcap", frames, floorplan, Settings())
     out = tmp_path / "out"
     code = main(["run", "--input", str(session), "--depth-model", str(depth_dir), "--seg-model", str(seg_dir),

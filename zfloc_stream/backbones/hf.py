@@ -150,6 +150,8 @@ class _HfModel:
         self.cfg = cfg
         self.name = str(spec)
         local_only = not cfg.download
+        bars = transformers.utils.logging.is_progress_bar_enabled()
+        transformers.utils.logging.disable_progress_bar()  # our CLI owns the terminal
         try:
             self.model = getattr(transformers, self.auto_class).from_pretrained(source, local_files_only=local_only)
             with open(transformers.utils.cached_file(source, PREPROCESSOR_FILE, local_files_only=local_only)) as f:
@@ -163,6 +165,9 @@ class _HfModel:
             ) from None
         except (ValueError, KeyError, json.JSONDecodeError) as err:
             raise BackboneError(f"{self.kind} model {spec} cannot be loaded as {self.auto_class}: {_first_line(err)}") from None
+        finally:
+            if bars:
+                transformers.utils.logging.enable_progress_bar()
         if not isinstance(pre, dict):
             raise BackboneError(f"{self.kind} model {spec}: {PREPROCESSOR_FILE} is not a JSON object")
         self.preprocess = Preprocess.from_config(pre, self.name)
