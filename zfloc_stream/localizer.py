@@ -51,7 +51,7 @@ class Localizer:
         self.frames_pushed += 1
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
-        if needs_backbones(frame, self.settings.backbones):
+        if self._wants_backbones(frame):
             frame = self._perceive(frame)
             timings["backbones"] = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -74,6 +74,13 @@ class Localizer:
         if self.frames_fused % self.settings.localizer.every_k_frames == 0:
             self._round(index, plane_pose, timings)
         return self._estimate(index, frame.timestamp, plane_pose, timings)
+
+    def _wants_backbones(self, frame) -> bool:
+        """Does a network have work on this frame? Asked of the perception when there is
+        one, else of the settings (which would make one)."""
+        if self.perception is not None:
+            return self.perception.wants(frame)
+        return needs_backbones(frame, self.settings.backbones)
 
     def _perceive(self, frame: CameraFrame) -> CameraFrame:
         """Network depth / labels for one frame. A model that cannot be loaded raises

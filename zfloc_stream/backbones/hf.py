@@ -254,5 +254,3 @@ def _check_rgb(image, model: str) -> np.ndarray:
     if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
         raise BackboneError(f"{model}: images must be HxWx3 uint8 RGB, got shape {im.shape} {im.dtype}")
     return im
-
-
