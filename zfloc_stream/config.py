@@ -446,6 +446,26 @@ class ReplaySettings(Section):
     atol: float = Field(1e-12, ge=0, le=1)  # absolute tolerance (numbers near zero)
 
 
+class BackboneSettings(Section):
+    """Pretrained networks for plain RGB cameras (zfloc_stream/backbones, extra [torch]).
+    A model is a local folder or a Hugging Face hub id; empty = not used. Depth from a
+    depth camera always wins over network depth."""
+
+    depth_model: str = ""  # e.g. depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf (metric depth)
+    seg_model: str = ""  # e.g. nvidia/segformer-b0-finetuned-ade-512-512 (ADE20K classes)
+    download: bool = False  # fetch a hub id that is not in the local Hugging Face cache (off: never touch the network)
+    device: str = "auto"  # auto (CUDA when present, else CPU), cpu, cuda, cuda:N
+    half_on_gpu: bool = True  # float16 weights and inputs on a GPU (CPU always float32)
+    batch_size: int = Field(default=4, ge=1)  # frames per network call (latency: a batch waits for its last frame)
+    max_depth: float = 10.0  # m, network depth beyond this is dropped (0 = no reading): far indoor depth is unreliable
+    # classes of the segmenter, matched by name in the model's id2label (case-insensitive,
+    # each 'a;b' or 'a, b' name split into synonyms); every other class is 'other'
+    wall_classes: list[str] = ["wall", "door", "double door", "screen door", "windowpane", "window", "column", "pillar"]
+    floor_classes: list[str] = ["floor", "flooring", "rug", "carpet", "carpeting", "mat"]
+    ceiling_classes: list[str] = ["ceiling"]
+    unknown_classes: list[str] = ["unlabeled", "unlabelled", "background", "void"]
+
+
 class Settings(Section):
     seed: int = Field(0, ge=0, le=2**63 - 1)
     floorplan: FloorplanSettings = FloorplanSettings()
@@ -459,6 +479,7 @@ class Settings(Section):
     datasets: DatasetSettings = DatasetSettings()
     study: StudySettings = StudySettings()
     replay: ReplaySettings = ReplaySettings()
+    backbones: BackboneSettings = BackboneSettings()
 
 
 def _merge(base: dict, update: dict) -> dict:

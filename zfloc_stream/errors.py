@@ -27,3 +27,8 @@ class FrameError(InputError):
 
 class SessionLogError(InputError):
     """An MCAP session file is missing, corrupt, truncated or lacks required topics."""
+
+
+class BackboneError(ZflocError):
+    """A pretrained network cannot be used: the [torch] extra is missing, the model folder
+    or hub id cannot be found, or the model is not of the kind asked for."""

@@ -52,21 +52,32 @@ def _check_scalar(value, name: str) -> None:
 class CameraFrame:
     """Depth + per-pixel labels from a pinhole camera (OpenCV axes: x right, y down, z fwd).
 
-    depth: HxW float32, metres along the optical axis; 0 or NaN = no reading.
-    labels: HxW uint8 with the codes above, or None when a geometric labeller must label.
+    depth: HxW float32, metres along the optical axis; 0 or NaN = no reading. None for a
+    plain RGB camera: the depth network (backbones) fills it in.
+    labels: HxW uint8 with the codes above, or None when a segmentation network (if one
+    is named) or the geometric labeller must label.
     K: 3x3 intrinsics. T_odom_cam: 4x4 camera-to-odometry pose (relative poses only).
     ground_truth: optional (x, y, theta) of the camera in the floorplan frame; never seen
     by the localizer, carried for logging and scoring.
+    rgb: optional HxWx3 uint8 colour image (RGB order) of the same pixel grid.
     """
 
-    depth: np.ndarray
+    depth: np.ndarray | None
     labels: np.ndarray | None
     K: np.ndarray
     T_odom_cam: np.ndarray
     timestamp: float
     ground_truth: np.ndarray | None = field(default=None, compare=False)
+    rgb: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self):
+        rgb = None if self.rgb is None else _check_rgb(self.rgb)
+        object.__setattr__(self, "rgb", rgb)
+        if self.depth is None:
+            if rgb is None:
+                raise FrameError("a camera frame needs depth or an RGB image")
+            self._check_rest(rgb.shape[:2])
+            return
         d = _as_float_array(self.depth, "depth", np.float32)
         if d.ndim != 2 or d.size == 0:
             raise FrameError(f"depth must be a non-empty HxW array, got shape {d.shape}")
@@ -78,10 +89,16 @@ class CameraFrame:
         if not valid.any():
             raise FrameError("depth has no valid reading (all zero or NaN)")
         object.__setattr__(self, "depth", d)
+        if rgb is not None and rgb.shape[:2] != d.shape:
+            raise FrameError(f"rgb image is {rgb.shape[1]}x{rgb.shape[0]} but depth is {d.shape[1]}x{d.shape[0]}")
+        self._check_rest(d.shape)
+
+    def _check_rest(self, shape: tuple[int, int]) -> None:
+        """Labels, K, pose and time (shared by depth and RGB-only frames)."""
         if self.labels is not None:
             lab = np.asarray(self.labels)
-            if lab.shape != d.shape:
-                raise FrameError(f"labels shape {lab.shape} does not match depth shape {d.shape}")
+            if lab.shape != shape:
+                raise FrameError(f"labels shape {lab.shape} does not match image shape {shape}")
             if lab.dtype != np.uint8:
                 raise FrameError(f"labels must be uint8, got {lab.dtype}")
             if lab.max() > OTHER:
@@ -99,7 +116,16 @@ class CameraFrame:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.depth.shape
+        return self.depth.shape if self.depth is not None else self.rgb.shape[:2]
+
+
+def _check_rgb(rgb) -> np.ndarray:
+    im = np.asarray(rgb)
+    if im.ndim != 3 or im.shape[2] != 3 or im.size == 0:
+        raise FrameError(f"rgb must be an HxWx3 image, got shape {im.shape}")
+    if im.dtype != np.uint8:
+        raise FrameError(f"rgb must be uint8, got {im.dtype}")
+    return im
 
 
 @dataclass(frozen=True)

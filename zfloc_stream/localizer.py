@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from .backbones.perception import Perception, needs_backbones
 from .config import Settings
 from .errors import ZflocError
 from .estimate import Estimate
@@ -29,8 +30,12 @@ from .tracking import HypothesisTracker
 
 
 class Localizer:
-    def __init__(self, floorplan: Floorplan, settings: Settings | None = None):
+    def __init__(self, floorplan: Floorplan, settings: Settings | None = None, perception: Perception | None = None):
+        """perception: the networks for RGB-only camera frames; by default made from
+        settings.backbones when the first such frame arrives (a replay of a session whose
+        frames carry depth never loads them)."""
         self.settings = settings or Settings()
+        self.perception = perception
         self.floorplan = floorplan
         self.bev = RollingBEV(self.settings)
         self.tracker = HypothesisTracker(self.settings.tracking)
@@ -47,6 +52,16 @@ class Localizer:
         self.frames_pushed += 1
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
+        if self._wants_backbones(frame):
+            frame = self._perceive(frame)
+            timings["backbones"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+        if isinstance(frame, CameraFrame) and frame.depth is None:
+            if self.perception is not None and self.perception.depth is not None:
+                reason = f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
+            else:
+                reason = "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
+            return self._estimate(index, frame.timestamp, None, timings, skipped=reason)
         try:
             self.bev.add(frame)
             plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
@@ -60,6 +75,20 @@ class Localizer:
         if self.frames_fused % self.settings.localizer.every_k_frames == 0:
             self._round(index, plane_pose, timings)
         return self._estimate(index, frame.timestamp, plane_pose, timings)
+
+    def _wants_backbones(self, frame) -> bool:
+        """Does a network have work on this frame? Asked of the perception when there is
+        one, else of the settings (which would make one)."""
+        if self.perception is not None:
+            return self.perception.wants(frame)
+        return needs_backbones(frame, self.settings.backbones)
+
+    def _perceive(self, frame: CameraFrame) -> CameraFrame:
+        """Network depth / labels for one frame. A model that cannot be loaded raises
+        (BackboneError): that is the run's setup, not one bad frame."""
+        if self.perception is None:
+            self.perception = Perception.from_settings(self.settings.backbones)
+        return frame if self.perception is None else self.perception.complete([frame])[0]
 
     # ------------------------------------------------------------------------------
     def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> None:

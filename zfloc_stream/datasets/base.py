@@ -35,7 +35,8 @@ class Sequence:
     use). window_floorplan: optional factory (start, stop) -> Floorplan for loaders whose
     map is built from the same log and must leave a window out (Carmen held-out maps).
     settings_overrides: what this source needs on top of the defaults (e.g. a laser:
-    fixed scale); user settings still win over it.
+    fixed scale); user settings still win over it. needs_depth_network: its camera
+    frames are RGB only (a depth network must fill in depth).
     """
 
     def __init__(
@@ -48,6 +49,7 @@ class Sequence:
         settings_overrides: dict | None = None,
         window_floorplan: Callable[[int, int], Floorplan] | None = None,
         source: str = "",
+        needs_depth_network: bool = False,
     ):
         self.name = name
         self._frame_source = frame_source
@@ -57,6 +59,7 @@ class Sequence:
         self.settings_overrides = dict(settings_overrides or {})
         self._window_floorplan = window_floorplan
         self.source = source
+        self.needs_depth_network = needs_depth_network
 
     @property
     def ground_truth(self) -> np.ndarray:

@@ -3,8 +3,9 @@
 
 Frames, their ground truth (/groundtruth/pose, NaN where absent) and the floorplan come
 from the file; a session that carries no floorplan uses `map.yaml` beside it when there
-is one. Laser sessions get a fixed scale (a laser measures metres). The session is read
-once up front to count its frames and collect the ground truth.
+is one. Laser sessions get a fixed scale (a laser measures metres); RGB-only camera
+sessions a metric prior (their depth comes from a network, metric to about 10%). The
+session is read once up front to count its frames and collect the ground truth.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError
-from ..frames import LaserFrame
+from ..frames import CameraFrame, LaserFrame
 from .base import Sequence, register
 
 SIBLING_FLOORPLAN = "map.yaml"
@@ -27,11 +28,12 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
 
     path = Path(path)
     session = read_session(path)
-    truth, laser = [], False
+    truth, laser, rgb_only = [], False, False
     for frame in session.frames():
         gt = frame.ground_truth
         truth.append(np.full(3, np.nan) if gt is None else np.asarray(gt, dtype=float)[:3])
         laser = laser or isinstance(frame, LaserFrame)
+        rgb_only = rgb_only or (isinstance(frame, CameraFrame) and frame.depth is None)
     if not truth:
         raise InputError(f"{path}: the session holds no input frame")
 
@@ -52,8 +54,9 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
         n_frames=len(truth),
         ground_truth=np.array(truth),
         floorplan=floorplan if floorplan is not None else load_floorplan,
-        settings_overrides={"estimator": {"scale_mode": "fixed"}} if laser else {},
+        settings_overrides={"estimator": {"scale_mode": "fixed" if laser else "prior"}} if laser or rgb_only else {},
         source=f"mcap:{path}",
+        needs_depth_network=rgb_only,
     )
 
 

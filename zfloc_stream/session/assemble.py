@@ -8,17 +8,21 @@ from ..frames import CameraFrame, LaserFrame
 from . import schemas as S
 
 
-def camera_frame_from_msgs(depth, labels, calibration, odometry, ground_truth, heading_axis: str, timestamp: float) -> CameraFrame:
-    """depth/labels: RawImage (labels may be None); calibration: CameraCalibration;
-    odometry / ground_truth: PoseInFrame (ground_truth may be None)."""
-    d = S.depth_from_msg(depth)
+def camera_frame_from_msgs(depth, labels, calibration, odometry, ground_truth, heading_axis: str, timestamp: float, image=None) -> CameraFrame:
+    """depth/labels: RawImage (either may be None when a colour image is given);
+    calibration: CameraCalibration; odometry / ground_truth: PoseInFrame (ground_truth may
+    be None); image: RawImage rgb8/bgr8 or CompressedImage, or None."""
+    d = None if depth is None else S.depth_from_msg(depth)
+    rgb = None if image is None else S.image_from_msg(image)
     lab = None if labels is None else S.labels_from_msg(labels)
     K, width, height = S.calibration_from_msg(calibration)
-    if (width, height) != (0, 0) and (height, width) != d.shape:
-        raise SessionLogError(f"calibration is for {width}x{height} images but depth is {d.shape[1]}x{d.shape[0]}")
+    shape = d.shape if d is not None else rgb.shape[:2]
+    if (width, height) != (0, 0) and (height, width) != shape:
+        what = "depth" if d is not None else "the colour image"
+        raise SessionLogError(f"calibration is for {width}x{height} images but {what} is {shape[1]}x{shape[0]}")
     T = S.matrix_from_pose(odometry.pose)
     gt = None if ground_truth is None else S.planar_pose_from_pose(ground_truth.pose, heading_axis)
-    return CameraFrame(d, lab, K, T, timestamp, ground_truth=gt)
+    return CameraFrame(d, lab, K, T, timestamp, ground_truth=gt, rgb=rgb)
 
 
 def laser_frame_from_msgs(scan, range_min: float, range_max: float, odometry, ground_truth, heading_axis: str, timestamp: float) -> LaserFrame:

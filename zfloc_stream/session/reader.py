@@ -41,6 +41,7 @@ from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
 
 MAGIC = b"\x89MCAP0\r\n"
 EXPECTED_SCHEMAS = {
+    S.TOPIC_IMAGE: ("foxglove.RawImage", "foxglove.CompressedImage"),
     S.TOPIC_DEPTH: "foxglove.RawImage",
     S.TOPIC_LABELS: "foxglove.RawImage",
     S.TOPIC_CALIBRATION: "foxglove.CameraCalibration",
@@ -54,7 +55,7 @@ EXPECTED_SCHEMAS = {
 }
 # Topics whose progress decides that a timestamp is complete (calibration is a state:
 # often published once, so it must not hold frames back).
-_PROGRESS_TOPICS = (S.TOPIC_DEPTH, S.TOPIC_SCAN, S.TOPIC_LABELS, S.TOPIC_ODOMETRY, S.TOPIC_GROUND_TRUTH, S.TOPIC_STATUS)
+_PROGRESS_TOPICS = (S.TOPIC_IMAGE, S.TOPIC_DEPTH, S.TOPIC_SCAN, S.TOPIC_LABELS, S.TOPIC_ODOMETRY, S.TOPIC_GROUND_TRUTH, S.TOPIC_STATUS)
 # A topic that stops early would otherwise hold every later frame in memory.
 _MAX_PENDING_STAMPS = 16
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
@@ -205,11 +206,14 @@ class Session:
             bev=parts.get(S.TOPIC_BEV, (None,))[0],
         )
         where = f"t={S.ns_to_seconds(stamp):.9f}"
-        has_camera, has_scan = S.TOPIC_DEPTH in parts, S.TOPIC_SCAN in parts
+        has_camera = S.TOPIC_DEPTH in parts or S.TOPIC_IMAGE in parts
+        has_scan = S.TOPIC_SCAN in parts
         if not (has_camera or has_scan):
             orphans = sorted(t for t in parts if t not in (S.TOPIC_CALIBRATION, S.TOPIC_ODOMETRY))  # odometry may run at its own rate
             if orphans:
-                self.problems.append(f"{where}: {', '.join(orphans)} without a {S.TOPIC_DEPTH} or {S.TOPIC_SCAN} message of the same timestamp dropped")
+                self.problems.append(
+                    f"{where}: {', '.join(orphans)} without a {S.TOPIC_DEPTH}, {S.TOPIC_IMAGE} or {S.TOPIC_SCAN} message of the same timestamp dropped"
+                )
             return None
         if S.TOPIC_ODOMETRY not in parts:  # odometry at its own rate: the pose interpolated at this stamp
             T, reason = (None, f"no {S.TOPIC_ODOMETRY} message") if odometry is None else odometry.at(stamp)
@@ -227,7 +231,9 @@ class Session:
                     return None
                 axis = gt_meta.get(S.HEADING_AXIS_KEY, "z")
                 labels = parts.get(S.TOPIC_LABELS, (None,))[0]
-                frame = camera_frame_from_msgs(parts[S.TOPIC_DEPTH][0], labels, calib, odom, gt, axis, S.ns_to_seconds(stamp))
+                depth = parts.get(S.TOPIC_DEPTH, (None,))[0]
+                image = parts.get(S.TOPIC_IMAGE, (None,))[0]
+                frame = camera_frame_from_msgs(depth, labels, calib, odom, gt, axis, S.ns_to_seconds(stamp), image)
             else:
                 scan, meta = parts[S.TOPIC_SCAN]
                 cfg = (self.settings or Settings()).logging
@@ -288,8 +294,9 @@ class Session:
             return None
         schema = schemas.get(channel.schema_id)
         name = None if schema is None else schema.name
-        if name != expected:
-            self._fail(f"topic {channel.topic} has schema {name!r}, expected {expected!r}")
+        allowed = expected if isinstance(expected, tuple) else (expected,)
+        if name not in allowed:
+            self._fail(f"topic {channel.topic} has schema {name!r}, expected {' or '.join(map(repr, allowed))}")
             return None
         if channel.topic == S.TOPIC_STATUS:
             if channel.message_encoding != "json":
@@ -489,12 +496,12 @@ def _open_scanning(path: Path, problems: list[str]) -> tuple[dict, dict]:
 
 
 def _check_topics(path: Path, topics: set[str]) -> None:
-    if S.TOPIC_DEPTH not in topics and S.TOPIC_SCAN not in topics:
-        raise SessionLogError(f"{path}: no input frames: neither {S.TOPIC_DEPTH} nor {S.TOPIC_SCAN} is in the file")
+    if not topics & {S.TOPIC_DEPTH, S.TOPIC_IMAGE, S.TOPIC_SCAN}:
+        raise SessionLogError(f"{path}: no input frames: none of {S.TOPIC_DEPTH}, {S.TOPIC_IMAGE}, {S.TOPIC_SCAN} is in the file")
     if S.TOPIC_ODOMETRY not in topics:
         raise SessionLogError(f"{path}: topic {S.TOPIC_ODOMETRY} is missing (every frame needs its relative pose)")
-    if S.TOPIC_DEPTH in topics and S.TOPIC_CALIBRATION not in topics:
-        raise SessionLogError(f"{path}: topic {S.TOPIC_CALIBRATION} is missing (depth frames need intrinsics)")
+    if topics & {S.TOPIC_DEPTH, S.TOPIC_IMAGE} and S.TOPIC_CALIBRATION not in topics:
+        raise SessionLogError(f"{path}: topic {S.TOPIC_CALIBRATION} is missing (camera frames need intrinsics)")
 
 
 def read_session(path: str | Path, salvage: bool = False) -> Session:

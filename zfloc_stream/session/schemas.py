@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.Grid_pb2 import Grid
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
@@ -38,6 +39,7 @@ from ..sim2 import Sim2
 TOPIC_DEPTH = "/camera/depth"
 TOPIC_LABELS = "/camera/labels"
 TOPIC_CALIBRATION = "/camera/calibration"
+TOPIC_IMAGE = "/camera/image"  # colour image: RawImage rgb8/bgr8 or CompressedImage jpeg/png
 TOPIC_SCAN = "/scan"
 TOPIC_ODOMETRY = "/odometry"
 TOPIC_GROUND_TRUTH = "/groundtruth/pose"
@@ -46,7 +48,7 @@ TOPIC_HYPOTHESES = "/zfloc/hypotheses"
 TOPIC_BEV = "/zfloc/bev"
 TOPIC_STATUS = "/zfloc/status"
 TOPIC_FLOORPLAN = "/zfloc/floorplan"  # Grid, once, for display (the attachment is the source of truth)
-INPUT_TOPICS = (TOPIC_CALIBRATION, TOPIC_DEPTH, TOPIC_LABELS, TOPIC_SCAN, TOPIC_ODOMETRY, TOPIC_GROUND_TRUTH)
+INPUT_TOPICS = (TOPIC_CALIBRATION, TOPIC_IMAGE, TOPIC_DEPTH, TOPIC_LABELS, TOPIC_SCAN, TOPIC_ODOMETRY, TOPIC_GROUND_TRUTH)
 OUTPUT_TOPICS = (TOPIC_POSE, TOPIC_HYPOTHESES, TOPIC_BEV, TOPIC_STATUS)
 
 FRAME_ODOM = "odom"
@@ -70,6 +72,8 @@ SESSION_FORMAT = "zfloc-session/1"
 
 LABEL_ENCODINGS = ("mono8", "8UC1")
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
+COLOR_ENCODINGS = ("rgb8", "bgr8")  # RawImage on /camera/image
+COMPRESSED_FORMATS = ("jpeg", "jpg", "png")  # CompressedImage on /camera/image
 
 
 def crc32_hex(data: bytes) -> str:
@@ -137,6 +141,33 @@ def labels_from_msg(msg: RawImage) -> np.ndarray:
     if msg.encoding not in LABEL_ENCODINGS:
         raise SessionLogError(f"labels encoding '{msg.encoding}' is not supported (expected mono8)")
     return _image_rows(msg, "u1")
+
+
+def image_to_msg(rgb: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> RawImage:
+    """rgb8, rows packed: lossless, so a replay sees the same pixels."""
+    im = np.ascontiguousarray(rgb, dtype=np.uint8)
+    h, w = im.shape[:2]
+    return RawImage(timestamp=to_stamp(ns), frame_id=frame_id, width=w, height=h, encoding="rgb8", step=3 * w, data=im.tobytes())
+
+
+def image_from_msg(msg) -> np.ndarray:
+    """HxWx3 uint8 in RGB order from a RawImage (rgb8, bgr8) or a CompressedImage (jpeg, png)."""
+    if msg.DESCRIPTOR.full_name == "foxglove.CompressedImage":  # decoders build their own classes: match by name
+        fmt = msg.format.lower().removeprefix("image/")
+        if fmt not in COMPRESSED_FORMATS:
+            raise SessionLogError(f"compressed image format '{msg.format}' is not supported (expected jpeg or png)")
+        import cv2  # only compressed colour images need it
+
+        bgr = cv2.imdecode(np.frombuffer(msg.data, dtype=np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise SessionLogError(f"compressed {fmt} image cannot be decoded")
+        return np.ascontiguousarray(bgr[:, :, ::-1])
+    if msg.encoding not in COLOR_ENCODINGS:
+        raise SessionLogError(f"colour image encoding '{msg.encoding}' is not supported (expected one of {', '.join(COLOR_ENCODINGS)})")
+    w = int(msg.width)
+    flat = _image_rows(RawImage(encoding=msg.encoding, width=3 * w, height=msg.height, step=msg.step, data=msg.data), "u1")
+    im = flat.reshape(flat.shape[0], w, 3)
+    return np.ascontiguousarray(im[:, :, ::-1]) if msg.encoding == "bgr8" else im
 
 
 # --- calibration ------------------------------------------------------------------------------

@@ -39,7 +39,7 @@ from . import schemas as S
 from .assemble import laser_frame_from_msgs
 from .sink import Record, RecordSink
 
-_OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
+_OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CompressedImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _MEDIA_TYPES = {".yaml": "application/yaml", ".yml": "application/yaml", ".png": "image/png", ".pgm": "image/x-portable-graymap"}
 
@@ -230,26 +230,27 @@ class SessionWriter:
             raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
 
     def _write_camera(self, index: int, frame: CameraFrame, ns: int) -> CameraFrame:
-        h, w = frame.depth.shape
+        h, w = frame.shape
         calib = S.calibration_to_msg(frame.K, w, h, ns)
-        depth = S.depth_to_msg(frame.depth, ns)
-        labels = None if frame.labels is None else S.labels_to_msg(frame.labels, ns)
         odom = S.pose_to_msg(frame.T_odom_cam, ns, S.FRAME_ODOM)
         gt = _truth_msg(index, frame.ground_truth, ns, "z")
         axis = {S.HEADING_AXIS_KEY: "z"}
         self._write(S.TOPIC_CALIBRATION, calib, ns, index)
-        self._write(S.TOPIC_DEPTH, depth, ns, index)
-        if labels is not None:
-            self._write(S.TOPIC_LABELS, labels, ns, index)
+        if frame.rgb is not None:
+            self._write(S.TOPIC_IMAGE, S.image_to_msg(frame.rgb, ns), ns, index)
+        if frame.depth is not None:
+            self._write(S.TOPIC_DEPTH, S.depth_to_msg(frame.depth, ns), ns, index)
+        if frame.labels is not None:
+            self._write(S.TOPIC_LABELS, S.labels_to_msg(frame.labels, ns), ns, index)
         self._write(S.TOPIC_ODOMETRY, odom, ns, index, axis)
         if gt is not None:
             self._write(S.TOPIC_GROUND_TRUTH, gt, ns, index, axis)
-        # Images and K are stored exactly (32FC1 / mono8 bytes, K as doubles): only the pose,
-        # the time and the ground truth change in the round trip, so the arrays are reused
-        # instead of decoded again (a 640x480 frame saves a copy and a validation pass).
+        # Images and K are stored exactly (rgb8 / 32FC1 / mono8 bytes, K as doubles): only the
+        # pose, the time and the ground truth change in the round trip, so the arrays are
+        # reused instead of decoded again (a 640x480 frame saves a copy and a validation pass).
         T = S.matrix_from_pose(odom.pose)
         truth = None if gt is None else S.planar_pose_from_pose(gt.pose, "z")
-        return CameraFrame(frame.depth, frame.labels, frame.K, T, S.ns_to_seconds(ns), ground_truth=truth)
+        return CameraFrame(frame.depth, frame.labels, frame.K, T, S.ns_to_seconds(ns), ground_truth=truth, rgb=frame.rgb)
 
     def _write_laser(self, index: int, frame: LaserFrame, ns: int) -> LaserFrame:
         scan = S.scan_to_msg(frame.ranges, frame.angle_min, frame.angle_increment, ns)

@@ -17,6 +17,8 @@ EPILOG = """examples:
   zfloc-stream run --floorplan plan.dxf --input robot.mcap --topic scan=/front/scan --out out/   # a ROS 2 bag
   zfloc-stream demo --floorplan plan.dxf              # a simulated walk through your own building
   zfloc-stream export out/session.mcap --tum out.txt  # the logged trajectory for evo
+  zfloc-stream run --input phone.mcap --depth-model depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf \
+      --seg-model nvidia/segformer-b0-finetuned-ade-512-512 --out out/     # plain RGB camera ([torch] extra)
   zfloc-stream map-from-log intel.log.gz --exclude 375:454 --out held-out-map/
   zfloc-stream config > my.yaml                       # the default settings, to edit
 """
@@ -96,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="ROS 2 bags: the topic for a role (scan, depth, camera_info, odom, tf, tf_static), e.g. scan=/front/scan")
     run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
     run.add_argument("--out", type=Path, default=Path("zfloc-run"), help="output folder (default ./zfloc-run)")
+    run.add_argument("--depth-model", metavar="ID_OR_DIR", help="metric depth network for RGB frames: a local folder or a "
+                     "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
+    run.add_argument("--seg-model", metavar="ID_OR_DIR", help="semantic segmentation network for wall/floor/ceiling labels "
+                     "(sets backbones.seg_model; needs the [torch] extra)")
     _add_floorplan_options(run)
     _add_settings_args(run)
 
@@ -124,6 +130,16 @@ def _settings(args):
     return load_settings(args.config, args.set)
 
 
+def _run_settings(args, base_overrides: dict | None = None):
+    """Settings of `run`: defaults, the source's needs, --config, --set, then the
+    --depth-model / --seg-model flags."""
+    settings = load_settings(args.config, args.set, base_overrides=base_overrides)
+    models = {k: v for k, v in (("depth_model", args.depth_model), ("seg_model", args.seg_model)) if v is not None}
+    if not models:
+        return settings
+    return settings.model_copy(update={"backbones": settings.backbones.model_copy(update=models)})
+
+
 def cmd_demo(args) -> int:
     from ..sim import SimSettings, build_scene, simulate
     from .session_runner import run_session
@@ -147,11 +163,12 @@ def cmd_demo(args) -> int:
 
 
 def cmd_run(args) -> int:
+    from ..backbones import Perception
     from ..datasets import detect_source
     from ..datasets.ros2 import parse_topic_overrides
     from .session_runner import run_session
 
-    settings = _settings(args)
+    settings = _run_settings(args)
     topics = parse_topic_overrides(args.topic)
     floorplan = None
     if args.floorplan is not None:
@@ -159,7 +176,7 @@ def cmd_run(args) -> int:
     sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed,
                              settings=settings, topics=topics)
     if sequence.settings_overrides:
-        settings = load_settings(args.config, args.set, base_overrides=sequence.settings_overrides)
+        settings = _run_settings(args, sequence.settings_overrides)
     if floorplan is None and sequence.source.startswith("carmen:"):
         print(
             "zfloc-stream: WARNING: no --floorplan: the map is built from this log's own scans, "
@@ -167,9 +184,12 @@ def cmd_run(args) -> int:
             "held-out map: zfloc-stream map-from-log LOG --exclude A:B --out DIR",
             file=sys.stderr,
         )
+    perception = Perception.from_settings(settings.backbones)  # loads now: a bad model fails before any output
+    if sequence.needs_depth_network and (perception is None or perception.depth is None):
+        raise ZflocError(f"{args.input} holds RGB camera frames without depth: name a depth network with --depth-model ID_OR_DIR")
     outcome = run_session(
         sequence.floorplan, sequence.frames(), settings, args.out, total=sequence.n_frames,
-        progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum,
+        progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum, perception=perception,
     )
     _report(outcome)
     return 0

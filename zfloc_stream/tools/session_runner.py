@@ -50,10 +50,15 @@ def run_session(
     progress: bool = True,
     description: str = "localizing",
     tum: str | Path | None = None,
+    perception=None,
 ) -> SessionOutcome:
+    """perception: networks that complete RGB camera frames before they are logged, so the
+    session holds their depth and labels and replays without them."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    localizer = Localizer(floorplan, settings)
+    localizer = Localizer(floorplan, settings, perception)
+    if perception is not None:
+        frames = perception.stream(frames)
     estimates: list[Estimate] = []
     truths: list = []
     with (
