@@ -458,6 +458,21 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
 
 
+def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, cfg: EstimatorSettings) -> list[tuple]:
+    """Refined, fully scored rows for the warm starts that no kept hypothesis stands for
+    (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
+    models = np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm])
+    field = floorplan_scorer(floorplan, cfg.scoring).face_field
+    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
+    scores = score_hypotheses(floorplan, view, models, cfg.scoring)
+    rows = []
+    for i, m in enumerate(models):
+        both = np.vstack([m[None], kept]) if len(kept) else m[None]
+        if len(distinct(both, anchor, cfg.scoring)) == len(both):  # not suppressed by any kept one
+            rows.append((m, scores.total[i], scores.consistency[i], scores.violation[i], WARM))
+    return rows
+
+
 def _validate(obs, scale_prior: float, iterations: int) -> None:
     if not isinstance(obs, BevObservation):
         raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
@@ -555,11 +570,12 @@ def localize(
         cv[:n_refine][better] = rescored.violation[better]
     order = descending(total)
     keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
+    rows = [(cand[i], total[i], cc[i], cv[i], str(labels_arr[top[i]])) for i in keep]
+    if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
+        rows += _missing_warm_starts(floorplan, obs, view, warm, cand[keep], anchor, cfg)
+        rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
     t3 = time.perf_counter()
 
-    hypotheses = [
-        Hypothesis(Sim2(cand[i, 3], cand[i, 2], (cand[i, 0], cand[i, 1])), float(total[i]), float(cc[i]), float(cv[i]), str(labels_arr[top[i]]))
-        for i in keep
-    ]
+    hypotheses = [Hypothesis(Sim2(m[3], m[2], (m[0], m[1])), float(c), float(a), float(v), label) for m, c, a, v, label in rows]
     timings = {"model_estimation": t1 - t0, "scoring": t2 - t1, "refinement": t3 - t2}
     return LocalizationResult(hypotheses, timings, int(len(models)))
