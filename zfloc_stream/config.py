@@ -124,6 +124,7 @@ class SolverSettings(Section):
 class ScoringSettings(Section):
     tau_c: float = Field(0.1, gt=0, le=10)  # m, consistency threshold (paper)
     tau_v: float = Field(0.2, gt=0, le=10)  # m, violation threshold (paper)
+    violation_weight: float = Field(1.0, ge=0, le=10)  # C = Cc - w * Cv (1 = the paper's C)
     sparse_spacing: float = Field(0.25, gt=0, le=10)  # m, spacing of BEV line samples for the coarse pass
     max_sparse_points: int = Field(128, ge=1, le=1_000_000)  # ...widened so the coarse pass uses about this many points at most
     top_k: int = Field(50, ge=1, le=100_000)  # hypotheses re-ranked with the full score

@@ -341,7 +341,7 @@ class BevView:
 class Scores:
     """Full scores of a set of hypotheses."""
 
-    total: np.ndarray  # C = Cc - Cv
+    total: np.ndarray  # C = Cc - violation_weight * Cv
     consistency: np.ndarray  # Cc
     violation: np.ndarray  # Cv
 
@@ -353,7 +353,7 @@ def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings:
     scorer = floorplan_scorer(floorplan, settings)
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
     cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size)
-    return Scores(cc - cv, cc, cv)
+    return Scores(cc - settings.violation_weight * cv, cc, cv)
 
 
 def distinct(models: np.ndarray, anchor: np.ndarray, settings: ScoringSettings, limit: int | None = None) -> np.ndarray:
