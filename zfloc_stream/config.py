@@ -303,7 +303,8 @@ class TrackingSettings(Section):
     merge_angle_deg: float = Field(5.0, ge=0, le=180)  # ...and headings closer than this...
     merge_log_scale: float = Field(0.05, ge=0, le=10)  # ...and log scales closer than this: one mode
     # status
-    confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within birth_score_gap) before it can be tracked
+    confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within confirm_score_gap) before it can be tracked
+    confirm_score_gap: float = Field(0.1, ge=0, le=10)  # "near the top": a fresh score within this of the round's best
     ambiguity_ratio: float = Field(0.5, gt=0, le=1)  # a second confirmed mode with weight >= this * best: ambiguous
     lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
     lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)

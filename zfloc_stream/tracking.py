@@ -79,7 +79,7 @@ class Mode:
     running_score: float  # exponentially smoothed score, drives the weight
     weight: float = 0.0  # normalised over modes
     age: int = 1  # rounds since birth (1 in the round it was born)
-    hits: int = 1  # rounds in which it was found near the top (within birth_score_gap of the round's best)
+    hits: int = 1  # rounds in which it was found near the top (within confirm_score_gap of the round's best)
     collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
     tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
 
@@ -252,7 +252,7 @@ class HypothesisTracker:
             mode.kf.update(z.reshape(4, 1), R=self._meas_cov)
             mode.kf.x[2, 0] = wrap_angle(mode.kf.x[2, 0])
             mode.score = fresh
-            near_top = fresh >= scores[0] - s.birth_score_gap
+            near_top = fresh >= scores[0] - s.confirm_score_gap
             mode.hits += 1 if near_top else 0
             # scores[0] is another hypothesis whenever j > 0 (each matches one mode)
             collapsed = j > 0 and scores[0] - fresh > s.lost_score_gap
