@@ -406,18 +406,18 @@ class SimDatasetSettings(Section):
 class Ros2Settings(Section):
     """ROS 2 bags (rosbag2 MCAP, CDR messages) and sensors at their own rates (issue 13)."""
 
-    max_odometry_gap: float = 0.5  # s, a frame between two odometry/tf messages further apart than this is skipped
+    max_odometry_gap: float = Field(0.5, gt=0, le=3600)  # s, a frame between two odometry/tf messages further apart than this is skipped
 
 
 class VectorFloorplanSettings(Section):
     """DXF / SVG / GeoJSON floorplans: lines and circles come from the vectors; the
     occupancy raster (distance field, Cv) is drawn from them at this resolution."""
 
-    resolution: float = 0.05  # m per raster cell
-    wall_thickness: float = 0.1  # m, a wall drawn as a line is rasterised this thick
-    solid_max_width: float = 0.6  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
-    margin: float = 1.0  # m of free border around the drawing
-    max_cells: int = 25000000  # larger rasters are refused (a wrong unit scale, usually)
+    resolution: float = Field(0.05, ge=0.005, le=10)  # m per raster cell
+    wall_thickness: float = Field(0.1, gt=0, le=10)  # m, a wall drawn as a line is rasterised this thick
+    solid_max_width: float = Field(0.6, ge=0, le=100)  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
+    margin: float = Field(1.0, ge=0, le=1000)  # m of free border around the drawing
+    max_cells: int = Field(25_000_000, ge=1, le=1_000_000_000)  # larger rasters are refused (a wrong unit scale, usually)
 
 
 class DatasetSettings(Section):
@@ -458,8 +458,8 @@ class BackboneSettings(Section):
     download: bool = False  # fetch a hub id that is not in the local Hugging Face cache (off: never touch the network)
     device: str = "auto"  # auto (CUDA when present, else CPU), cpu, cuda, cuda:N
     half_on_gpu: bool = True  # float16 weights and inputs on a GPU (CPU always float32)
-    batch_size: int = Field(default=4, ge=1)  # frames per network call (latency: a batch waits for its last frame)
-    max_depth: float = 10.0  # m, network depth beyond this is dropped (0 = no reading): far indoor depth is unreliable
+    batch_size: int = Field(default=4, ge=1, le=1024)  # frames per network call (latency: a batch waits for its last frame)
+    max_depth: float = Field(10.0, gt=0, le=1000)  # m, network depth beyond this is dropped (0 = no reading): far indoor depth is unreliable
     # classes of the segmenter, matched by name in the model's id2label (case-insensitive,
     # each 'a;b' or 'a, b' name split into synonyms); every other class is 'other'
     wall_classes: list[str] = ["wall", "door", "double door", "screen door", "windowpane", "window", "column", "pillar"]
