@@ -329,10 +329,14 @@ class _FrameGrouper:
 
     def __init__(self, session: Session):
         self.session = session
-        self.pending: dict[int, dict] = {}
-        self.progress: dict[str, int] = {}
+        # Frames are keyed (stamp, occurrence): real logs repeat stamps (printed with few
+        # digits), so the n-th message of each topic at one stamp belongs to the n-th frame.
+        self.pending: dict[tuple[int, int], dict] = {}
+        self.progress: dict[str, tuple[int, int]] = {}
+        self.seen: dict[tuple[str, int], int] = {}  # (topic, stamp) -> messages so far
         self.calibrations: list[tuple[int, object]] = []  # (stamp, message), in file order
-        self.released_up_to = -1
+        self.released_up_to = (-1, 0)
+        self.session_warned_repeats = False
         gap = (session.settings or Settings()).datasets.ros2.max_odometry_gap
         self.odometry = PoseTrack(S.TOPIC_ODOMETRY, gap)  # every odometry pose, for frames between its stamps
 
@@ -346,27 +350,31 @@ class _FrameGrouper:
                     self.odometry.add(stamp, S.matrix_from_pose(msg.pose))
                 except SessionLogError:
                     pass  # a broken pose: reported when a frame of that stamp is assembled
-            if stamp <= self.released_up_to:
+            occurrence = self.seen.get((topic, stamp), 0)
+            self.seen[(topic, stamp)] = occurrence + 1
+            key = (stamp, occurrence)
+            if key <= self.released_up_to:
                 self.session.problems.append(f"{topic} message at t={S.ns_to_seconds(stamp):.9f} arrived after its frame and was dropped")
                 continue
-            parts = self.pending.setdefault(stamp, {})
-            if topic in parts:
-                self.session.problems.append(f"duplicate {topic} message at t={S.ns_to_seconds(stamp):.9f} dropped")
-                continue
-            parts[topic] = (msg, meta)
+            if occurrence == 1 and not self.session_warned_repeats:
+                self.session.problems.append(f"repeated timestamps (first at t={S.ns_to_seconds(stamp):.9f}): frames kept in file order")
+                self.session_warned_repeats = True
+            self.pending.setdefault(key, {})[topic] = (msg, meta)
             if topic in _PROGRESS_TOPICS:
-                self.progress[topic] = max(stamp, self.progress.get(topic, -1))
-            yield from self._release(min(self.progress.values()) if self.progress else -1)
+                self.progress[topic] = max(key, self.progress.get(topic, (-1, 0)))
+            yield from self._release(min(self.progress.values()) if self.progress else (-1, 0))
         yield from self._release(None)
 
     def _release(self, before: int | None) -> Iterator[tuple[int, dict]]:
         """Release stamps < before (all when None), oldest first; and the oldest ones
         beyond the pending bound."""
-        for stamp in sorted(self.pending):
-            if before is not None and stamp >= before and len(self.pending) <= _MAX_PENDING_STAMPS:
+        for key in sorted(self.pending):
+            if before is not None and key >= before and len(self.pending) <= _MAX_PENDING_STAMPS:
                 break
-            parts = self.pending.pop(stamp)
-            self.released_up_to = stamp
+            parts = self.pending.pop(key)
+            stamp = key[0]
+            self.released_up_to = key
+            self.seen = {k: n for k, n in self.seen.items() if k[1] >= stamp}
             self.odometry.drop_before(stamp)  # later frames have later stamps
             calib = self._calibration_at(stamp)
             if calib is not None:
