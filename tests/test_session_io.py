@@ -1,5 +1,6 @@
 """SessionWriter + read_session: round trips, Foxglove compatibility, files of other tools."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +183,20 @@ def test_foreign_file_grouping_and_dropped_frames(tmp_path):
     expected = interpolate_pose(frames[1].T_odom_cam, frames[3].T_odom_cam, 0.5)
     np.testing.assert_allclose(got[2].frame.T_odom_cam, expected, atol=1e-9)
     assert len(session.problems) == 1 and "no /odometry pose" in session.problems[0] and "outside" in session.problems[0]
+
+
+def test_foreign_file_with_repeated_timestamps_keeps_every_frame_in_order(tmp_path):
+    """A log printed with few digits gives several frames one stamp: the n-th message of
+    each topic at that stamp makes the n-th frame (belgioioso-camera-50 is all one stamp)."""
+    frames = [dataclasses.replace(f, timestamp=7.0) for f in camera_frames(4, seed=6, labels=False)]
+    _foreign_file(tmp_path / "same.mcap", frames, drop_odometry_of=())
+    session = read_session(tmp_path / "same.mcap")
+    got = list(session.records())
+    assert len(got) == 4
+    for r, f in zip(got, frames):
+        np.testing.assert_allclose(r.frame.T_odom_cam, f.T_odom_cam, atol=1e-9)
+        np.testing.assert_allclose(r.frame.ground_truth, f.ground_truth)
+    assert len(session.problems) == 1 and "repeated timestamps" in session.problems[0]
 
 
 def test_errors_name_the_file_and_fault(tmp_path):
