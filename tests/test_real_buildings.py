@@ -3,6 +3,8 @@ comes from the first round on, a track is kept through parts the map lacks, and 
 correlative seeding finds what the minimal samples miss on a map built from scans."""
 
 import csv
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,3 +113,20 @@ def test_correlative_seeds_find_a_rigid_alignment_and_the_reference_refines_it()
 def _rot(theta: float) -> np.ndarray:
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
+
+
+EVAL_REAL = Path(__file__).resolve().parents[1] / "benchmarks" / "eval_real.py"
+INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" / "intel-corrected.log.gz"
+
+
+@pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")
+def test_real_building_benchmark_ci_subset():
+    """One held-out Intel window through benchmarks/eval_real.py, online and reference
+    (the full table: python benchmarks/eval_real.py)."""
+    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
+    eval_real = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(eval_real)
+    row = eval_real.run_window("intel", 445, 20, 0, [], True)
+    assert row["success"] and row["ref_success"], row
+    assert row["first_pose_frame"] == Settings().localizer.every_k_frames - 1  # a pose from round 1
+    assert "### laser" in eval_real.table([row], [20], True)
