@@ -123,7 +123,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         seq = carmen_sequence(path, settings)
         floorplan = seq.floorplan_for(start, stop)
         truth = seq.ground_truth[start:stop]
-        frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames()
+        frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames
         result, localizer = localize_frames(floorplan, frames, settings)
         row.update(result)
         if reference:
