@@ -279,3 +279,15 @@ def test_gibson_fixture_localizes_end_to_end():
     poses = [localizer.push(frame).pose for frame in seq.frames()]
     run = evaluate_run(position_errors(poses, seq.ground_truth), (1.0, 0.5))
     assert run.success[0.5] and run.max_error < 0.3
+
+
+def test_carmen_directory_spec_opens_every_log_in_order(tmp_path):
+    _two_wall_log(tmp_path / "b.log.gz", gz=True)
+    _two_wall_log(tmp_path / "a.clf")
+    (tmp_path / "README.md").write_text("not a log")
+    sequences = open_dataset(f"carmen:{tmp_path}", Settings())
+    assert [s.name for s in sequences] == ["a.clf", "b.log.gz"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(InputError, match="no Carmen log"):
+        open_dataset(f"carmen:{empty}", Settings())

@@ -1,12 +1,14 @@
 """The streaming localizer on simulated sequences: determinism, ambiguity in a symmetric
 building, kidnapping recovery, bad frames."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from zfloc_stream.config import Settings
+from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.rng import make_rng
 from zfloc_stream.sim import build_scene
@@ -116,6 +118,23 @@ def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
     for f in frames[6:]:
         est = loc.push(f)
     assert est.skipped is None and loc.frames_fused == 12 and loc.frames_pushed == 13
+
+
+
+def test_a_round_without_enough_evidence_says_why():
+    scene = build_scene("rooms", seed=0)
+    seq = simulate(scene, SimSettings(), seed=0, n_frames=10)
+    settings = Settings().model_copy(update={"localizer": Settings().localizer.model_copy(update={"min_wall_points": 10_000_000})})
+    _, est = _run(scene, seq, settings)
+    k = settings.localizer.every_k_frames
+    due = [e for e in est if (e.frame + 1) % k == 0]
+    assert due and all(e.round_skipped.startswith("too little evidence") and "min_wall_points" in e.round_skipped for e in due)
+    assert all(e.round_skipped is None for e in est if (e.frame + 1) % k)
+    assert all(e.status == "initializing" and e.pose is None for e in est)
+    status = status_to_json(due[0])  # the status topic carries the reason, and reads back
+    assert estimate_from_status(json.loads(encode_status(status))).round_skipped == due[0].round_skipped
+    _, ok = _run(scene, seq)
+    assert all(e.round_skipped is None for e in ok) and "round_skipped" not in status_to_json(ok[-1])
 
 
 @pytest.mark.slow

@@ -96,7 +96,16 @@ def test_a_failing_chunk_is_reported_and_the_study_goes_on(tmp_path):
     assert len(out.rows) == 4 and len(errors) == 2
     assert all("sensor cable unplugged" in r["error"] and r["sequence_name"] == "bad" for r in errors)
     (summary,) = out.summary
-    assert summary["n_errors"] == 2 and summary["n_runs"] == 2
+    # a cell that raised is a failed run, not one left out of the success rate
+    assert summary["n_errors"] == 2 and summary["n_runs"] == 4 and summary["n_no_pose"] == 0
+    good = [r for r in out.rows if not r["error"]]
+    assert summary["success_rate"]["1"]["mean"] == sum(r["success_1m"] for r in good) / 4  # noqa: E501
+
+
+def test_cli_exits_non_zero_when_cells_raised(tmp_path, capsys):
+    rc = main(["--dataset", "flaky-test:x", "--lengths", "20", "--seeds", "1", "--workers", "0", "--no-progress", "--out", str(tmp_path)])
+    assert rc == 1
+    assert "2 cell(s) raised" in capsys.readouterr().err
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):

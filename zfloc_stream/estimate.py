@@ -35,6 +35,7 @@ class Estimate:
     alternatives: tuple[Alternative, ...] = ()
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage for this push
     skipped: str | None = None  # reason when the frame was rejected and not fused
+    round_skipped: str | None = None  # why the round due at this frame did not run (None: ran, or none due)
 
     @property
     def scale(self) -> float:

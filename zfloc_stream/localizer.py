@@ -72,9 +72,10 @@ class Localizer:
         timings["fusion"] = time.perf_counter() - t0
         self._monitor()
 
+        round_skipped = None
         if self.frames_fused % self.settings.localizer.every_k_frames == 0:
-            self._round(index, plane_pose, timings)
-        return self._estimate(index, frame.timestamp, plane_pose, timings)
+            round_skipped = self._round(index, plane_pose, timings)
+        return self._estimate(index, frame.timestamp, plane_pose, timings, round_skipped=round_skipped)
 
     def _wants_backbones(self, frame) -> bool:
         """Does a network have work on this frame? Asked of the perception when there is
@@ -91,18 +92,21 @@ class Localizer:
         return frame if self.perception is None else self.perception.complete([frame])[0]
 
     # ------------------------------------------------------------------------------
-    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> None:
+    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> str | None:
         """Extract primitives, estimate (warm-started), update the tracker. A BEV with too
-        little evidence skips the round: the status stays as it is (initializing at first)."""
+        little evidence, or an estimator error, skips the round: the status stays as it is
+        (initializing at first) and the reason is returned for the frame's Estimate."""
         cfg = self.settings
         t0 = time.perf_counter()
         try:
             obs = self.bev.observation(make_rng(cfg.seed, "primitives", index))
-        except ZflocError:
-            obs = None
+        except ZflocError as err:
+            timings["primitives"] = time.perf_counter() - t0
+            return f"primitive extraction failed: {err}"
         timings["primitives"] = time.perf_counter() - t0
-        if obs is None or not self._enough_evidence(obs):
-            return
+        lacking = self._lacking_evidence(obs)
+        if lacking:
+            return lacking
         self.last_observation = obs
         tracked = self.tracker.confidently_tracking and not self._force_global
         self._force_global = False
@@ -118,14 +122,15 @@ class Localizer:
                 iterations=iterations,
                 global_search=not tracked,
             )
-        except ZflocError:
-            return
+        except ZflocError as err:
+            return f"estimator error: {err}"
         self.last_result = result
         for key, value in result.timings.items():
             timings[key] = value
         t0 = time.perf_counter()
         self.tracker.update(result.hypotheses, plane_pose[:2], index)
         timings["tracking"] = time.perf_counter() - t0
+        return None
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
@@ -141,12 +146,18 @@ class Localizer:
             self._inconsistent_frames = 0
             self._force_global = True
 
-    def _enough_evidence(self, obs) -> bool:
+    def _lacking_evidence(self, obs) -> str | None:
+        """Why the BEV is too thin for a round (None when it is enough)."""
         cfg = self.settings.localizer
-        return len(obs.wall_points) >= cfg.min_wall_points and len(obs.lines) + len(obs.circles) >= cfg.min_primitives
+        walls, primitives = len(obs.wall_points), len(obs.lines) + len(obs.circles)
+        if walls < cfg.min_wall_points:
+            return f"too little evidence: {walls} wall points < localizer.min_wall_points = {cfg.min_wall_points}"
+        if primitives < cfg.min_primitives:
+            return f"too little evidence: {primitives} lines/circles < localizer.min_primitives = {cfg.min_primitives}"
+        return None
 
     # ------------------------------------------------------------------------------
-    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None) -> Estimate:
+    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:
         status = self.tracker.status
         best = self.tracker.best
         if best is None or plane_pose is None:
@@ -158,4 +169,4 @@ class Localizer:
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
-        return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped)
+        return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped)

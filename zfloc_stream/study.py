@@ -313,8 +313,9 @@ def _spread(values) -> dict:
 
 def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
     """Per (dataset, length): SR per threshold and RMSEs computed per seed over all chunks
-    of all sequences, then mean and sample std over seeds. Cells that raised are left out
-    of SR and counted in n_errors."""
+    of all sequences, then mean and sample std over seeds. A cell that raised counts as a
+    failed run (no pose): leaving it out would make a crashing estimator look better than
+    one that answers wrongly. It is also counted in n_errors."""
     thresholds = [float(t) for t in settings.study.thresholds]
     reference = REFERENCE_THRESHOLD if REFERENCE_THRESHOLD in thresholds else thresholds[0]
     groups: dict[tuple, dict[int, list[dict]]] = defaultdict(lambda: defaultdict(list))
@@ -323,15 +324,15 @@ def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
         key = (row["dataset"], row["length"])
         if row.get("error") is not None:
             errors[key] += 1
-            groups[key]  # keep the group visible even if every cell failed
-            continue
         groups[key][row["seed"]].append(row)
     summary = []
     for (dataset, length), by_seed in sorted(groups.items(), key=lambda kv: (kv[0][0], -kv[0][1])):
         per_seed = []
         for seed, seed_rows in sorted(by_seed.items()):
-            successes = [{t: bool(r[_threshold_key(t)]) for t in thresholds} for r in seed_rows]
-            per_seed.append(summarize(successes, [r["rmse"] for r in seed_rows], thresholds, reference))
+            failed = [r.get("error") is not None for r in seed_rows]
+            successes = [{t: not bad and bool(r[_threshold_key(t)]) for t in thresholds} for r, bad in zip(seed_rows, failed)]
+            rmses = [float("nan") if bad else r["rmse"] for r, bad in zip(seed_rows, failed)]
+            per_seed.append(summarize(successes, rmses, thresholds, reference))
         summary.append(
             {
                 "dataset": dataset,
@@ -340,7 +341,7 @@ def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
                 "n_seeds": len(per_seed),
                 "n_runs": sum(s.n_runs for s in per_seed),
                 "n_errors": errors[(dataset, length)],
-                "n_no_pose": sum(s.n_no_pose for s in per_seed),
+                "n_no_pose": sum(s.n_no_pose for s in per_seed) - errors[(dataset, length)],  # errors apart
                 "success_rate": {f"{t:g}": _spread([s.success_rate[t] for s in per_seed]) for t in thresholds},
                 "rmse_succ": _spread([s.rmse_succ for s in per_seed]),
                 "rmse_all": _spread([s.rmse_all for s in per_seed]),

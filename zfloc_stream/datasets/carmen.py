@@ -211,7 +211,22 @@ def carmen_sequence(path, settings: Settings, floorplan=None, odometry_noise: fl
     )
 
 
+CARMEN_SUFFIXES = (".log", ".log.gz", ".clf", ".clf.gz")
+
+
+def _carmen_paths(arg: str) -> list[Path]:
+    """A log, or every Carmen log in a directory (sorted, so a study's cells are stable)."""
+    path = Path(arg)
+    if not path.is_dir():
+        return [path]
+    logs = sorted(p for p in path.iterdir() if p.is_file() and p.name.endswith(CARMEN_SUFFIXES))
+    if not logs:
+        raise InputError(f"{path}: no Carmen log ({', '.join(CARMEN_SUFFIXES)}) in this directory")
+    return logs
+
+
 @register("carmen")
 def load_carmen(args: str, settings: Settings) -> list[Sequence]:
-    """carmen:/path/log[.gz] (several logs separated by commas)."""
-    return [carmen_sequence(p, settings) for p in args.split(",") if p]
+    """carmen:/path/log[.gz] (several separated by commas), or carmen:DIR for every log in
+    DIR: `carmen:../shared/data/carmen` is the real-building benchmark's five buildings."""
+    return [carmen_sequence(p, settings) for a in args.split(",") if a for p in _carmen_paths(a)]

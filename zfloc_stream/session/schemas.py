@@ -390,6 +390,7 @@ STATUS_JSON_SCHEMA = {
             },
         },
         "skipped": {"type": ["string", "null"]},
+        "round_skipped": {"type": "string"},
         "timings": {"type": "object", "additionalProperties": {"type": "number"}},
     },
     "required": ["frame", "timestamp", "status"],
@@ -412,7 +413,7 @@ def _alignment_json(a: Sim2 | None) -> dict | None:
 
 
 def status_to_json(est: Estimate) -> dict:
-    return {
+    status = {
         "frame": int(est.frame),
         "timestamp": _num(est.timestamp),
         "status": est.status,
@@ -429,6 +430,9 @@ def status_to_json(est: Estimate) -> dict:
         "skipped": est.skipped,
         "timings": {str(k): float(v) for k, v in est.timings.items()},
     }
+    if est.round_skipped is not None:  # only where a due round did not run (older files lack the key)
+        status["round_skipped"] = est.round_skipped
+    return status
 
 
 def encode_status(status: dict) -> bytes:
@@ -481,6 +485,7 @@ def estimate_from_status(status: dict) -> Estimate:
             alts,
             {str(k): float(v) for k, v in (status.get("timings") or {}).items()},
             status.get("skipped"),
+            status.get("round_skipped"),
         )
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
         raise SessionLogError(f"status JSON is malformed ({type(err).__name__}: {err})") from None

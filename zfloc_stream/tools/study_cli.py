@@ -71,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(outcome.rows)} cells ({outcome.skipped} already done, {outcome.ran} run in {outcome.seconds:.1f} s"
           f" = {outcome.chunks_per_second:.3f} chunks/s), {failed} failed")
     print(f"wrote {outcome.out_dir}/results.csv, results.json, results.md, sr_vs_length.png")
+    if failed:  # counted as failures in the table; the exit status tells scripts too
+        print(f"zfloc-study: {failed} cell(s) raised (see the error column of results.csv); re-run to retry them", file=sys.stderr)
+        return 1
     return 0
 
 
