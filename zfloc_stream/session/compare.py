@@ -2,7 +2,7 @@
 
 Two kinds of facts, two rules:
 
-- decisions are compared exactly: the frame index, status, skip reason, whether a pose /
+- decisions are compared exactly: the frame index, status, skip reasons (frame and round), whether a pose /
   covariance / alignment exists, the number of hypotheses (status, /zfloc/hypotheses),
   their order (hypotheses[0] is the reported mode), message timestamps and frame ids,
   the BEV grid's size; any string, integer, boolean or null.
