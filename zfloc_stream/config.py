@@ -149,6 +149,13 @@ class RansacSettings(Section):
     tracking_iterations: int = Field(150, ge=1, le=1_000_000)  # fewer fresh samples while one mode is tracked
     max_hypotheses: int = Field(10, ge=1, le=1000)  # ranked distinct hypotheses returned
     match_fraction: float = Field(0.03, gt=0, le=1)  # each BEV minimal sample meets this fraction (>= 1) of its pruned floorplan matches
+    # guided samples near the live modes (warm start): BEV lines matched only to the
+    # floorplan lines they lie on under a mode's alignment
+    guided_iterations: int = Field(100, ge=0, le=1_000_000)  # per round, split over the guided modes
+    guided_modes: int = Field(3, ge=0, le=100)  # the heaviest live modes sampled around
+    guided_distance: float = Field(0.5, gt=0, le=100)  # m, a BEV segment's ends within this of a floorplan line match it
+    guided_angle_deg: float = Field(10.0, gt=0, le=90)  # and its direction within this
+    guided_shift: float = Field(2.0, gt=0, le=1000)  # m, translation change from the mode beyond which a guided model is dropped
 
 
 class CorrelativeSettings(Section):

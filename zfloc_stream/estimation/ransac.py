@@ -50,7 +50,7 @@ from ..errors import InputError
 from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
-from ..sim2 import Sim2
+from ..sim2 import Sim2, wrap_angle
 from .correlative import correlative_models
 from ..ties import descending, tie_keys
 from .refine import refine_batch
@@ -59,6 +59,7 @@ from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
 CORRELATIVE = "correlative"
+GUIDED = "guided"
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class Hypothesis:
     score: float  # C = Cc - Cv
     cc: float
     cv: float
-    solver: str  # "3L", "2L", "2C", "LC" or "warm"
+    solver: str  # "3L", "2L", "2C", "LC", "guided", "correlative" or "warm"
 
 
 @dataclass(frozen=True)
@@ -458,6 +459,56 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
 
 
+def _guided_candidates(lines: LineSet, fp_lines: LineSet, warm: Sim2, cfg) -> tuple[np.ndarray, np.ndarray]:
+    """For each BEV line, the floorplan lines it lies on under the warm alignment (angle
+    within guided_angle_deg, both ends within guided_distance of the line), as CSR
+    (starts (N + 1,), indices). Collinear floorplan walls are equivalent constraints."""
+    ends = warm.apply(lines.endpoints.reshape(-1, 2)).reshape(-1, 2, 2)
+    direction = ends[:, 1] - ends[:, 0]
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    aligned = np.abs(direction @ fp_lines.normals.T) < np.sin(np.deg2rad(cfg.guided_angle_deg))
+    offset = np.abs(np.einsum("nkd,md->nkm", ends, fp_lines.normals) - fp_lines.offsets[None, None, :]).max(axis=1)
+    rows, cols = np.nonzero(aligned & (offset < cfg.guided_distance))
+    starts = np.searchsorted(rows, np.arange(len(lines) + 1))
+    return starts, cols
+
+
+def _guided_models(bev: BevSamples, fp: FloorplanMatches, warm: Sim2, n: int, cfg: EstimatorSettings, rng, scale_prior: float) -> np.ndarray:
+    """Minimal samples near a live mode: BEV line pairs (triplets in free scale) matched
+    only to the floorplan lines they lie on under its alignment, so nearly every model is
+    a small correction of the mode (drift, a better fit) instead of a global guess. Among
+    thousands of floorplan lines a global sample rarely meets these few matches."""
+    r = cfg.ransac
+    free = cfg.scale_mode == "free"
+    samples, weights = (bev.triplets, bev.triplet_p) if free else (bev.pairs, bev.pair_p)
+    if n <= 0 or not len(samples):
+        return np.zeros((0, 4))
+    starts, cols = _guided_candidates(bev.lines, fp.lines, warm, r)
+    counts = np.diff(starts)
+    usable = (counts[samples] > 0).all(axis=1)
+    if not usable.any():
+        return np.zeros((0, 4))
+    samples = samples[usable]
+    p = None if weights is None else _probabilities(weights[usable])
+    picks = samples[rng.choice(len(samples), size=n, p=p)]
+    f = cols[starts[picks] + np.floor(rng.random(picks.shape) * counts[picks]).astype(np.int64)]
+    if free:
+        models = solve_3l(bev.lines.normals[picks], bev.lines.offsets[picks], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, "free")[0]
+    else:
+        mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
+        models = solve_2l(bev.lines.normals[picks], bev.lines.offsets[picks], fp.lines.normals[f], fp.lines.offsets[f],
+                          scale_prior, rng, cfg.solvers, mode)[0]
+    if not len(models):
+        return models
+    # the solvers also return the mirrored rotation of each sample: keep what is near the mode
+    anchor = bev.lines.endpoints.reshape(-1, 2).mean(axis=0)  # compare where the BEV lands, not the raw translation
+    c, si = np.cos(models[:, 2]), np.sin(models[:, 2])
+    landed = np.stack([models[:, 3] * (c * anchor[0] - si * anchor[1]), models[:, 3] * (si * anchor[0] + c * anchor[1])], axis=1)
+    shift = np.linalg.norm(landed + models[:, :2] - warm.apply(anchor), axis=1)
+    near = (np.abs(wrap_angle(models[:, 2] - warm.theta)) < np.deg2rad(2 * r.guided_angle_deg)) & (shift < r.guided_shift)
+    return models[near]
+
+
 def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, cfg: EstimatorSettings) -> list[tuple]:
     """Refined, fully scored rows for the warm starts that no kept hypothesis stands for
     (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
@@ -534,6 +585,12 @@ def localize(
     if warm:
         blocks.append(np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm]))
         labels += [WARM] * len(warm)
+        guided_modes = warm[: cfg.ransac.guided_modes]
+        per_mode = cfg.ransac.guided_iterations // max(1, len(guided_modes))
+        for w in guided_modes:
+            m = _guided_models(bev, fp, w, per_mode, cfg, rng, scale_prior)
+            blocks.append(m)
+            labels += [GUIDED] * len(m)
     if global_search and cfg.correlative.enabled and cfg.scale_mode != "free":
         seeds = _correlative_seeds(floorplan, obs, cfg, scale_prior)
         blocks.append(seeds)
