@@ -17,6 +17,7 @@ from session_helpers import camera_frames, laser_frames, write_fake_session
 
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.datasets.mcap import session_sequence
+from zfloc_stream.errors import SessionLogError
 from zfloc_stream.session import read_session
 from zfloc_stream.session import reader as R
 from zfloc_stream.session import schemas as S
@@ -243,3 +244,16 @@ def test_header_stamps_read_from_the_bytes_match_the_decoder():
     for bad in (msg.SerializeToString()[:-3], b"\x0a\xff"):
         with pytest.raises((ValueError, IndexError)):
             R._scan_stamp(bad, 1)
+
+
+def test_a_damaged_chunk_is_one_line_error_in_every_path(written, tmp_path):
+    data = bytearray(written["camera"].read_bytes())
+    chunk = sorted(read_session(written["camera"])._summary.chunk_indexes, key=lambda c: c.chunk_start_offset)[-2]
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[middle : middle + 8] = bytes(255 - b for b in data[middle : middle + 8])
+    (tmp_path / "bad.mcap").write_bytes(bytes(data))
+    for read in (lambda s: list(s.records(seek=False)), lambda s: list(s.records(20)), lambda s: s.frame_index(),
+                 lambda s: session_sequence(s.path, Settings(), floorplan=object())):
+        with pytest.raises(SessionLogError, match=r"bad\.mcap: .*(damaged|cannot)") as err:
+            read(read_session(tmp_path / "bad.mcap"))
+        assert "\n" not in str(err.value)

@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 from google.protobuf.descriptor_pb2 import FileDescriptorSet
-from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -443,7 +442,8 @@ class Session:
                 raise ValueError(f"a {type(record).__name__} record where the index puts a chunk")
             return [r for r in breakup_chunk(record, validate_crc=True) if isinstance(r, Message)]
         except Exception as err:  # noqa: BLE001 - any parser fault on damaged bytes
-            raise SessionLogError(f"{self.path}: damaged chunk at byte {chunk.chunk_start_offset} ({type(err).__name__}: {err}); try --salvage") from None
+            what = f"{type(err).__name__}: {err}".replace("\n", " ")
+            raise SessionLogError(f"{self.path}: damaged chunk at byte {chunk.chunk_start_offset} ({what}); try --salvage") from None
 
     def _records_indexed(self, index: FrameIndex, start: int, stop: int | None, outputs: bool) -> Iterator[FrameRecord]:
         """Frames start..stop-1 assembled from the messages the index names: only the
