@@ -39,13 +39,15 @@ import psutil
 
 from zfloc_stream.config import Settings
 from zfloc_stream.datasets.mcap import session_sequence
-from zfloc_stream.session import read_session, record_session
-from zfloc_stream.sim import build_scene, simulate
+from zfloc_stream.session import read_session
 
 SLICE = 50
 
 
 def write_session(path: Path, n_frames: int, scene_name: str) -> None:
+    from zfloc_stream.session import record_session  # the engine and simulator: not in the measuring processes
+    from zfloc_stream.sim import build_scene, simulate
+
     scene = build_scene(scene_name, seed=0)
     t0 = time.perf_counter()
     record_session(path, scene.floorplan, simulate(scene, seed=0, n_frames=n_frames), Settings(), metadata={"bench": "session_read"})
@@ -148,6 +150,7 @@ def main() -> None:
     mo, mn = res["memory", "old"], res["memory", "new"]
     print(f"{'iterate all frames':48s} {mo['all']:8.3f}s {mn['all']:8.3f}s {mo['all'] / mn['all']:8.1f}x")
     print(f"{'RSS growth while iterating all frames':48s} {mo['growth_mb']:7.1f}MB {mn['growth_mb']:7.1f}MB")
+    print(f"{'RSS after opening (before iterating)':48s} {mo['base_mb']:7.1f}MB {mn['base_mb']:7.1f}MB")
     print(f"{'peak RSS of the process (open + iterate)':48s} {mo['maxrss_mb']:7.1f}MB {mn['maxrss_mb']:7.1f}MB")
     print(f"deep slice identical in both paths (sha256 {new['digest']})")
 

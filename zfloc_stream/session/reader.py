@@ -254,7 +254,8 @@ class Session:
 
         outputs=False: the logged outputs are not decoded (empty LoggedOutputs). From start
         > 0 a file with a chunk index is read from the chunk holding that frame on (see
-        frame_index); seek=False, salvage and files without one read from the start."""
+        frame_index; `problems` then lists what the whole file drops); seek=False, salvage
+        and files without a chunk index read from the start."""
         index = self.frame_index() if seek and start > 0 else None
         if index is not None:
             yield from self._records_indexed(index, start, stop, outputs)
