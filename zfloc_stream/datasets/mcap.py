@@ -4,8 +4,11 @@
 Frames, their ground truth (/groundtruth/pose, NaN where absent) and the floorplan come
 from the file; a session that carries no floorplan uses `map.yaml` beside it when there
 is one. Laser sessions get a fixed scale (a laser measures metres); RGB-only camera
-sessions a metric prior (their depth comes from a network, metric to about 10%). The
-session is read once up front to count its frames and collect the ground truth.
+sessions a metric prior (their depth comes from a network, metric to about 10%).
+
+Counting the frames and collecting their ground truth takes one pass over the file that
+decodes only the small topics (the session's frame index: session/reader.py); the same
+index then lets `frames(start, stop)` read only the chunks that hold those frames.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import numpy as np
 
 from ..config import Settings
 from ..errors import InputError
-from ..frames import CameraFrame, LaserFrame
+from ..frames import LaserFrame
 from .base import Sequence, register
 
 SIBLING_FLOORPLAN = "map.yaml"
@@ -28,17 +31,21 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
 
     path = Path(path)
     session = read_session(path)
-    truth, laser, rgb_only = [], False, False
-    for frame in session.frames():
-        gt = frame.ground_truth
-        truth.append(np.full(3, np.nan) if gt is None else np.asarray(gt, dtype=float)[:3])
-        laser = laser or isinstance(frame, LaserFrame)
-        rgb_only = rgb_only or (isinstance(frame, CameraFrame) and frame.depth is None)
-    if not truth:
+    index = session.frame_index()
+    if index is not None:
+        truth, kinds = index.ground_truth, set(index.kinds)
+    else:  # no chunk index (a file from another tool): read it once, frame by frame
+        truth, kinds = [], set()
+        for frame in session.frames():
+            gt = frame.ground_truth
+            truth.append(np.full(3, np.nan) if gt is None else np.asarray(gt, dtype=float)[:3])
+            kinds.add("laser" if isinstance(frame, LaserFrame) else "rgb" if frame.depth is None else "depth")
+    if not len(truth):
         raise InputError(f"{path}: the session holds no input frame")
+    laser, rgb_only = "laser" in kinds, "rgb" in kinds
 
     def frames(start: int, stop: int):
-        return read_session(path).frames(start, stop)
+        return session.fresh().frames(start, stop)  # shares the index; its own problem list
 
     def load_floorplan():
         if session.floorplan is not None:
