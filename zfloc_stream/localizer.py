@@ -141,6 +141,9 @@ class Localizer:
         self._pending: deque[_Pending] = deque()  # rounds started, not yet applied, oldest first
         self._pool: Executor | None = None
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
+        lc = self.settings.localizer
+        if lc.pipeline == "pipelined" and lc.worker == "process":
+            self._executor().submit(int)  # start the process now: it takes a second or two to import
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -260,9 +263,10 @@ class Localizer:
         if outcome.result is None:
             return
         self.last_result = outcome.result
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         self.tracker.update(outcome.result.hypotheses, pending.plane_pose[:2], pending.job.index)
-        timings["tracking"] = time.perf_counter() - t0
+        timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
+        outcome.cpu_timings["tracking"] = time.thread_time() - c0
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
