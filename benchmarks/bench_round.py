@@ -17,6 +17,26 @@ worker thread; --process adds a worker process). Frames are rendered before timi
 
     python benchmarks/bench_round.py --quick        # a few minutes on 2 cores
     python benchmarks/bench_round.py                # more scenes, frames and windows
+
+Measured on the shared 2-core machine under load average 6-7 from other jobs (so walls are
+~1.5x CPU), `--quick`: a round (wall median) takes 180 ms on the apartment camera, 340 ms on
+the office laser, 360-610 ms on the aces / belgioioso camera sessions (fixed, prior, free
+scale) and 500 ms on an Intel Carmen window; fusion 8 ms (camera 160x120), 1 ms (laser).
+Push latency, 640x480, 60 frames (`--quick --skip-stages --latency-frames 60 --rate R`):
+
+    rate   labels      mode               median   p99    max  (ms)
+    10 Hz  labels      inline               8.8   223    235
+    10 Hz  labels      pipelined thread     9.4    31     45
+    10 Hz  labels      pipelined process    8.8    22     34
+    10 Hz  geometric   inline              10.0   206    218
+    10 Hz  geometric   pipelined thread    13.8    53     57
+    10 Hz  geometric   pipelined process   10.8    27     38
+    30 Hz  labels      pipelined thread    12.2   155    164   (rounds longer than 5 frames: joins wait)
+
+At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
+pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
+or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
+worker (CPU and GIL), not the start / join frames (max 13-18 ms at 10 Hz).
 """
 
 from __future__ import annotations
