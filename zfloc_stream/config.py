@@ -333,8 +333,24 @@ class LocalizerSettings(Section):
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
     monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
     monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
+    # Where a round runs (localizer.py). inline: inside the push of the frame that starts
+    # it, applied at once (the reference: every published number and recorded session).
+    # pipelined: on one worker beside the stream, applied exactly join_delay frames later
+    # (push blocks there if the worker is late), so push costs about one fusion. delayed:
+    # computed inline but applied join_delay frames later: bit for bit what pipelined gives,
+    # without a worker (studies, tests).
+    pipeline: Literal["inline", "pipelined", "delayed"] = "inline"
+    join_delay: int = Field(0, ge=0, le=10_000)  # frames from a round's start to its result (pipelined / delayed); 0 = every_k_frames
+    worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
 
     _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
+
+    @property
+    def round_delay(self) -> int:
+        """Frames between the start of a round and the frame its result is applied at."""
+        if self.pipeline == "inline":
+            return 0
+        return self.join_delay or self.every_k_frames
 
 
 class LoggingSettings(Section):

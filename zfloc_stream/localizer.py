@@ -1,19 +1,34 @@
 """The streaming localizer: one object an embedded loop feeds one frame at a time.
 
-    loc = Localizer(floorplan, settings)
-    for frame in frames:
-        est = loc.push(frame)
+    with Localizer(floorplan, settings) as loc:
+        for frame in frames:
+            est = loc.push(frame)
 
 Each push fuses the frame into the rolling BEV. Every k frames a round runs: primitives
 are extracted, the live modes are re-scored and refined first (warm start), fresh minimal
 samples are drawn (fewer while one mode is confidently tracked, a full global search while
 initializing or lost), and the tracker updates its modes. Between rounds the pose is the
 current best alignment applied to the frame's odometry-plane pose, so every frame has one.
+
+Where the round runs (localizer.pipeline): inline, inside the push of the frame i that
+starts it and applied there; or pipelined, on one worker beside the stream and applied at
+frame i + round_delay exactly (that push waits if the worker is late), never "when it is
+ready", so a run is deterministic. A round works on what it saw at frame i: a copy of the
+BEV grid, the tracker's warm starts and search mode, its rng (seeded by i), and at the
+join the tracker is updated with frame i's sensor position and index. `delayed` computes
+the round inline at frame i and applies it at the same join frame: bit for bit the
+pipelined results without a worker. close() (or leaving the `with`) stops the worker;
+rounds whose join frame no frame reached are dropped: the last estimate stays the last
+state, which is also what a replay of the session reproduces.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import time
+from collections import deque
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,11 +37,101 @@ from .config import Settings
 from .errors import ZflocError
 from .estimate import Estimate
 from .estimation import localize
+from .estimation.ransac import LocalizationResult
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
-from .frontend.bev import RollingBEV
+from .frontend.bev import BevSnapshot, RollingBEV
+from .observation import BevObservation
 from .rng import make_rng
+from .sim2 import Sim2
 from .tracking import HypothesisTracker
+
+
+@dataclass(frozen=True)
+class RoundJob:
+    """What the round started at frame `index` works on, fixed at that frame."""
+
+    index: int
+    snapshot: BevSnapshot | None  # None: nothing fused into the grid yet
+    warm_start: list[Sim2]
+    tracked: bool  # one mode confidently tracked and no global search asked for
+
+
+@dataclass
+class RoundOutcome:
+    index: int  # frame the round started at
+    observation: BevObservation | None  # None: too little evidence, the round was skipped
+    result: LocalizationResult | None  # None: skipped, or the estimator refused the BEV
+    skipped: str | None = None  # why the round did not run (Estimate.round_skipped of its join frame)
+    timings: dict[str, float] = field(default_factory=dict)  # wall seconds per stage
+    cpu_timings: dict[str, float] = field(default_factory=dict)  # CPU seconds per stage (the thread that ran it)
+
+
+def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
+    """Primitives + estimation of one round: a pure function of its inputs, so it gives the
+    same bits on the caller's thread, a worker thread or a worker process."""
+    cfg = settings
+    out = RoundOutcome(job.index, None, None)
+    t0, c0 = time.perf_counter(), time.thread_time()
+    try:
+        obs = None if job.snapshot is None else job.snapshot.observation(make_rng(cfg.seed, "primitives", job.index))
+        out.skipped = "too little evidence: nothing fused into the BEV yet" if obs is None else lacking_evidence(obs, cfg)
+    except ZflocError as err:
+        obs, out.skipped = None, f"primitive extraction failed: {err}"
+    out.timings["primitives"], out.cpu_timings["primitives"] = time.perf_counter() - t0, time.thread_time() - c0
+    if out.skipped is not None:
+        return out
+    out.observation = obs
+    try:
+        out.result = localize(
+            floorplan,
+            obs,
+            cfg.estimator,
+            make_rng(cfg.seed, "ransac", job.index),
+            scale_prior=cfg.estimator.scale_prior,
+            warm_start=job.warm_start,
+            iterations=cfg.estimator.ransac.tracking_iterations if job.tracked else cfg.estimator.ransac.iterations,
+            global_search=not job.tracked,
+        )
+    except ZflocError as err:  # a round the estimator refuses is skipped, the stream goes on
+        out.skipped = f"estimator error: {err}"
+        return out
+    out.timings.update(out.result.timings)
+    out.cpu_timings.update(out.result.cpu_timings)
+    return out
+
+
+def lacking_evidence(obs: BevObservation, settings: Settings) -> str | None:
+    """Why the BEV is too thin for a round (None when it is enough)."""
+    cfg = settings.localizer
+    walls, primitives = len(obs.wall_points), len(obs.lines) + len(obs.circles)
+    if walls < cfg.min_wall_points:
+        return f"too little evidence: {walls} wall points < localizer.min_wall_points = {cfg.min_wall_points}"
+    if primitives < cfg.min_primitives:
+        return f"too little evidence: {primitives} lines/circles < localizer.min_primitives = {cfg.min_primitives}"
+    return None
+
+
+# A worker process keeps the floorplan and settings it was started with (sent once).
+_PROCESS_STATE: tuple | None = None
+
+
+def _init_process(floorplan, settings: Settings) -> None:
+    global _PROCESS_STATE
+    _PROCESS_STATE = (floorplan, settings)
+
+
+def _process_round(job: RoundJob) -> RoundOutcome:
+    return run_round(*_PROCESS_STATE, job)
+
+
+@dataclass
+class _Pending:
+    job: RoundJob
+    join_at: int  # the push index whose estimate first carries the result
+    plane_pose: np.ndarray  # frame job.index's sensor pose: the tracker is anchored there
+    force_seq: int  # monitor requests seen when it started (a later one stays pending)
+    outcome: RoundOutcome | Future
 
 
 class Localizer:
@@ -45,12 +150,33 @@ class Localizer:
         self.last_observation = None  # BevObservation of the latest round, for overlays
         self._inconsistent_frames = 0  # consecutive frames the tracked alignment does not explain
         self._force_global = False  # the monitor asks the next round for a full global search
+        self._force_seq = 0  # how many times it asked (a request made after a round started outlives it)
+        self._pending: deque[_Pending] = deque()  # rounds started, not yet applied, oldest first
+        self._pool: Executor | None = None
+        self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
+        lc = self.settings.localizer
+        if lc.pipeline == "pipelined" and lc.worker == "process":
+            self._executor().submit(int)  # start the process now: it takes a second or two to import
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         index = self.frames_pushed
         self.frames_pushed += 1
         timings: dict[str, float] = {}
+        plane_pose, skipped = self._fuse(frame, timings)
+        if plane_pose is not None:
+            self._monitor()
+        # a round due here is applied even on a skipped frame: the join frame is fixed
+        reasons = []  # why rounds applied at this frame did not run
+        while self._pending and self._pending[0].join_at <= index:
+            reasons.append(self._apply(self._pending.popleft(), timings))
+        if plane_pose is not None and self.frames_fused % self.settings.localizer.every_k_frames == 0:
+            reasons.append(self._start_round(index, plane_pose, timings))
+        round_skipped = "; ".join(r for r in reasons if r) or None
+        return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped, round_skipped)
+
+    def _fuse(self, frame, timings: dict) -> tuple[np.ndarray | None, str | None]:
+        """Fuse one frame: its plane pose, or None and why it was skipped."""
         t0 = time.perf_counter()
         if self._wants_backbones(frame):
             frame = self._perceive(frame)
@@ -58,24 +184,30 @@ class Localizer:
             t0 = time.perf_counter()
         if isinstance(frame, CameraFrame) and frame.depth is None:
             if self.perception is not None and self.perception.depth is not None:
-                reason = f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
-            else:
-                reason = "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
-            return self._estimate(index, frame.timestamp, None, timings, skipped=reason)
+                return None, f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
+            return None, "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
         try:
             self.bev.add(frame)
             plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
         except ZflocError as err:  # one bad frame never kills the stream
-            stamp = getattr(frame, "timestamp", float("nan"))
-            return self._estimate(index, stamp, None, timings, skipped=str(err))
+            return None, str(err)
         self.frames_fused += 1
         timings["fusion"] = time.perf_counter() - t0
-        self._monitor()
+        return plane_pose, None
 
-        round_skipped = None
-        if self.frames_fused % self.settings.localizer.every_k_frames == 0:
-            round_skipped = self._round(index, plane_pose, timings)
-        return self._estimate(index, frame.timestamp, plane_pose, timings, round_skipped=round_skipped)
+    def close(self) -> None:
+        """Stop the worker. Rounds not applied yet are dropped (no frame reached their join
+        frame); the worker finishes the one it is running first."""
+        self._pending.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> "Localizer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     def _wants_backbones(self, frame) -> bool:
         """Does a network have work on this frame? Asked of the perception when there is
@@ -92,44 +224,65 @@ class Localizer:
         return frame if self.perception is None else self.perception.complete([frame])[0]
 
     # ------------------------------------------------------------------------------
-    def _round(self, index: int, plane_pose: np.ndarray, timings: dict) -> str | None:
-        """Extract primitives, estimate (warm-started), update the tracker. A BEV with too
-        little evidence, or an estimator error, skips the round: the status stays as it is
-        (initializing at first) and the reason is returned for the frame's Estimate."""
-        cfg = self.settings
+    def _start_round(self, index: int, plane_pose: np.ndarray, timings: dict) -> str | None:
+        """Fix what the round at frame `index` sees and run it (inline) or hand it over.
+        A BEV with too little evidence skips the round when it is applied: the status
+        stays as it is (initializing at first)."""
+        mode = self.settings.localizer.pipeline
         t0 = time.perf_counter()
-        try:
-            obs = self.bev.observation(make_rng(cfg.seed, "primitives", index))
-        except ZflocError as err:
-            timings["primitives"] = time.perf_counter() - t0
-            return f"primitive extraction failed: {err}"
-        timings["primitives"] = time.perf_counter() - t0
-        lacking = self._lacking_evidence(obs)
-        if lacking:
-            return lacking
-        self.last_observation = obs
-        tracked = self.tracker.confidently_tracking and not self._force_global
-        self._force_global = False
-        iterations = cfg.estimator.ransac.tracking_iterations if tracked else cfg.estimator.ransac.iterations
-        try:
-            result = localize(
-                self.floorplan,
-                obs,
-                cfg.estimator,
-                make_rng(cfg.seed, "ransac", index),
-                scale_prior=cfg.estimator.scale_prior,
-                warm_start=self.tracker.warm_start(),
-                iterations=iterations,
-                global_search=not tracked,
-            )
-        except ZflocError as err:
-            return f"estimator error: {err}"
-        self.last_result = result
-        for key, value in result.timings.items():
-            timings[key] = value
-        t0 = time.perf_counter()
-        self.tracker.update(result.hypotheses, plane_pose[:2], index)
-        timings["tracking"] = time.perf_counter() - t0
+        try:  # a worker gets a copy: the grid changes under it while the stream goes on
+            snapshot = self.bev.snapshot(copy=mode == "pipelined")
+        except ZflocError:
+            snapshot = None
+        job = RoundJob(index, snapshot, self.tracker.warm_start(), self.tracker.confidently_tracking and not self._force_global)
+        pending = _Pending(job, index + self.settings.localizer.round_delay, plane_pose, self._force_seq, None)
+        if mode == "pipelined":
+            pending.outcome = self._executor().submit(*self._task(job))
+            timings["round_start"] = time.perf_counter() - t0
+        else:
+            pending.outcome = run_round(self.floorplan, self.settings, job)
+        if pending.join_at <= index:
+            return self._apply(pending, timings)
+        self._pending.append(pending)
+        return None
+
+    def _executor(self) -> Executor:
+        if self._pool is None:
+            if self.settings.localizer.worker == "process":
+                # spawn, not fork: the caller may hold threads (the session writer's)
+                context = multiprocessing.get_context("spawn")
+                self._pool = ProcessPoolExecutor(1, context, _init_process, (self.floorplan, self.settings))
+            else:
+                self._pool = ThreadPoolExecutor(1, thread_name_prefix="zfloc-round")
+        return self._pool
+
+    def _task(self, job: RoundJob) -> tuple:
+        if self.settings.localizer.worker == "process":
+            return _process_round, job
+        return run_round, self.floorplan, self.settings, job
+
+    def _apply(self, pending: _Pending, timings: dict) -> str | None:
+        """The round's result lands: the tracker updates as of the frame the round started at.
+        Returns why the round did not run (None when it did)."""
+        outcome = pending.outcome
+        if isinstance(outcome, Future):
+            t0 = time.perf_counter()
+            outcome = outcome.result()  # waits if the worker is late; a bug in it raises here
+            timings["round_wait"] = time.perf_counter() - t0
+        self.last_round = outcome
+        timings.update(outcome.timings)
+        if outcome.observation is None:
+            return outcome.skipped
+        self.last_observation = outcome.observation
+        if pending.force_seq == self._force_seq:  # this round did the requested global search
+            self._force_global = False
+        if outcome.result is None:
+            return outcome.skipped
+        self.last_result = outcome.result
+        t0, c0 = time.perf_counter(), time.thread_time()
+        self.tracker.update(outcome.result.hypotheses, pending.plane_pose[:2], pending.job.index)
+        timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
+        outcome.cpu_timings["tracking"] = time.thread_time() - c0
         return None
 
     def _monitor(self) -> None:
@@ -145,16 +298,7 @@ class Localizer:
         if self._inconsistent_frames >= cfg.monitor_frames:
             self._inconsistent_frames = 0
             self._force_global = True
-
-    def _lacking_evidence(self, obs) -> str | None:
-        """Why the BEV is too thin for a round (None when it is enough)."""
-        cfg = self.settings.localizer
-        walls, primitives = len(obs.wall_points), len(obs.lines) + len(obs.circles)
-        if walls < cfg.min_wall_points:
-            return f"too little evidence: {walls} wall points < localizer.min_wall_points = {cfg.min_wall_points}"
-        if primitives < cfg.min_primitives:
-            return f"too little evidence: {primitives} lines/circles < localizer.min_primitives = {cfg.min_primitives}"
-        return None
+            self._force_seq += 1
 
     # ------------------------------------------------------------------------------
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:

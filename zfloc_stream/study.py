@@ -125,13 +125,13 @@ def run_cell(cell: Cell, overrides: dict | None = None) -> dict:
             raise InputError(f"dataset {cell.dataset}: sequence {cell.sequence} is {seq.name!r}, expected {cell.sequence_name!r}")
         settings = cell_settings(overrides, cell.seed, seq.settings_overrides)
         study = settings.study
-        localizer = Localizer(seq.floorplan_for(cell.start, cell.stop), settings)
         poses, truth, status = [], [], None
-        for frame in seq.frames(cell.start, cell.stop):
-            est = localizer.push(frame)
-            poses.append(est.pose)
-            truth.append(np.full(3, np.nan) if frame.ground_truth is None else frame.ground_truth)
-            status = est.status
+        with Localizer(seq.floorplan_for(cell.start, cell.stop), settings) as localizer:
+            for frame in seq.frames(cell.start, cell.stop):
+                est = localizer.push(frame)
+                poses.append(est.pose)
+                truth.append(np.full(3, np.nan) if frame.ground_truth is None else frame.ground_truth)
+                status = est.status
         truth = np.asarray(truth, dtype=float)
         if not np.isfinite(truth[-study.eval_frames :, :2]).all():
             raise InputError(f"{cell.key}: ground truth missing in the last {study.eval_frames} frames")

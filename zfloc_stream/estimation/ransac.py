@@ -76,6 +76,7 @@ class LocalizationResult:
     hypotheses: list[Hypothesis]  # best first, pairwise distinct
     timings: dict[str, float] = field(default_factory=dict)  # seconds: model_estimation, scoring, refinement
     n_models: int = 0  # models generated (solver outputs + warm starts) before scoring
+    cpu_timings: dict[str, float] = field(default_factory=dict)  # the same stages in CPU seconds of the calling thread
 
     @property
     def best(self) -> Hypothesis | None:
@@ -558,7 +559,7 @@ def localize(
         lo, hi = scale_prior / (1.0 + cfg.solvers.prior_range), scale_prior * (1.0 + cfg.solvers.prior_range)
         bounded = {"min_scale": max(cfg.solvers.min_scale, lo), "max_scale": min(cfg.solvers.max_scale, hi)}
         cfg = cfg.model_copy(update={"solvers": cfg.solvers.model_copy(update=bounded)})
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
 
     # ---- model estimation ------------------------------------------------------------
     full_cfg = _settings_of(floorplan)
@@ -597,16 +598,17 @@ def localize(
         labels += [CORRELATIVE] * len(seeds)
     models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
     labels_arr = np.array(labels, dtype=object)
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.thread_time()
 
     # ---- scoring -----------------------------------------------------------------------
     anchor = obs.wall_points.mean(axis=0)
     if len(models) == 0:
-        return LocalizationResult([], {"model_estimation": t1 - t0, "scoring": 0.0, "refinement": 0.0}, 0)
+        zero = {"scoring": 0.0, "refinement": 0.0}
+        return LocalizationResult([], {"model_estimation": t1 - t0, **zero}, 0, {"model_estimation": c1 - c0, **zero})
     sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
     view = BevView.of(obs, cfg.scoring.tau_v)
     ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
-    t2 = time.perf_counter()
+    t2, c2 = time.perf_counter(), time.thread_time()
 
     # ---- refinement --------------------------------------------------------------------
     top = ranking.index
@@ -631,8 +633,9 @@ def localize(
     if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
         rows += _missing_warm_starts(floorplan, obs, view, warm, cand[keep], anchor, cfg)
         rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
-    t3 = time.perf_counter()
+    t3, c3 = time.perf_counter(), time.thread_time()
 
     hypotheses = [Hypothesis(Sim2(m[3], m[2], (m[0], m[1])), float(c), float(a), float(v), label) for m, c, a, v, label in rows]
     timings = {"model_estimation": t1 - t0, "scoring": t2 - t1, "refinement": t3 - t2}
-    return LocalizationResult(hypotheses, timings, int(len(models)))
+    cpu = {"model_estimation": c1 - c0, "scoring": c2 - c1, "refinement": c3 - c2}
+    return LocalizationResult(hypotheses, timings, int(len(models)), cpu)

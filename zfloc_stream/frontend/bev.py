@@ -180,42 +180,19 @@ class RollingBEV:
         return grid + pending + rays + self._trajectory.nbytes + self.gravity.buffered_bytes
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
-        b = self.settings.bev
+        return self.snapshot(copy=False).observation(rng)
+
+    def snapshot(self, copy: bool = True) -> "BevSnapshot":
+        """What observation() reads, frozen: a pipelined round extracts its observation on a
+        worker while this BEV keeps fusing frames (copy=True copies the grid, ~3 MB at the
+        defaults, well under a millisecond)."""
         g = self.grid
         if g.ix0 is None:
             raise InputError("BEV is empty: no frame fused yet")
-        wall = (
-            (g.wall >= b.wall_min_observations)
-            & (g.wall >= b.wall_min_ratio * g.hits)  # mostly seen as wall, not as clutter
-            & (g.logodds > b.occupied_threshold)
-        )
-        if not wall.any():
-            raise InputError("BEV has no wall points yet")
-        known = (g.logodds != 0) | (g.wall > 0)
-        rows, cols = np.nonzero(known.any(axis=1))[0], np.nonzero(known.any(axis=0))[0]
-        m = int(np.ceil(b.crop_margin / b.resolution))
-        r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, g.n)
-        c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, g.n)
-        lo = g.logodds[r0:r1, c0:c1]
-        wall = wall[r0:r1, c0:c1]
-        free = lo < b.free_threshold
-        occupied = (lo > b.occupied_threshold) | wall
-        clearance = distance_transform_edt(~occupied) * b.resolution
-        clearance = np.where(free, clearance, 0.0)
-        origin = np.array([(g.ix0 + c0) * b.resolution, (g.iy0 + r0) * b.resolution])
-        wr, wc = np.nonzero(wall)
-        points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
-        lines, circles = _extract_primitives(points, self.settings, rng)
-        return BevObservation(
-            wall_points=points,
-            origin=origin,
-            resolution=b.resolution,
-            free=free,
-            clearance=clearance,
-            lines=lines,
-            circles=circles,
-            trajectory=self.trajectory,
-        )
+        arrays = (g.logodds, g.wall, g.hits)
+        if copy:
+            arrays = tuple(a.copy() for a in arrays)
+        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings)
 
     # ------------------------------------------------------------------------------
     # lasers
@@ -383,6 +360,54 @@ class RollingBEV:
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
         _increment(g.hits, hit_flat)
         _increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
+
+
+class BevSnapshot:
+    """The grid of a RollingBEV at one frame and how to turn it into a BevObservation.
+    Pure: the same snapshot and rng give the same observation on any thread or process."""
+
+    def __init__(self, logodds, wall, hits, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings):
+        self.logodds, self.wall, self.hits = logodds, wall, hits
+        self.ix0, self.iy0 = ix0, iy0
+        self.trajectory = trajectory
+        self.settings = settings
+
+    def observation(self, rng: np.random.Generator) -> BevObservation:
+        b = self.settings.bev
+        n = self.logodds.shape[0]
+        wall = (
+            (self.wall >= b.wall_min_observations)
+            & (self.wall >= b.wall_min_ratio * self.hits)  # mostly seen as wall, not as clutter
+            & (self.logodds > b.occupied_threshold)
+        )
+        if not wall.any():
+            raise InputError("BEV has no wall points yet")
+        known = (self.logodds != 0) | (self.wall > 0)
+        rows, cols = np.nonzero(known.any(axis=1))[0], np.nonzero(known.any(axis=0))[0]
+        m = int(np.ceil(b.crop_margin / b.resolution))
+        r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, n)
+        c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, n)
+        lo = self.logodds[r0:r1, c0:c1]
+        wall = wall[r0:r1, c0:c1]
+        free = lo < b.free_threshold
+        occupied = (lo > b.occupied_threshold) | wall
+        clearance = distance_transform_edt(~occupied) * b.resolution
+        clearance = np.where(free, clearance, 0.0)
+        origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
+        wr, wc = np.nonzero(wall)
+        points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
+        lines, circles = _extract_primitives(points, self.settings, rng)
+        return BevObservation(
+            wall_points=points,
+            origin=origin,
+            resolution=b.resolution,
+            free=free,
+            clearance=clearance,
+            lines=lines,
+            circles=circles,
+            trajectory=self.trajectory,
+        )
+
 
 
 def _increment(counts: np.ndarray, flat: np.ndarray) -> None:

@@ -26,9 +26,8 @@ def record_session(
 ) -> list[Estimate]:
     from ..localizer import Localizer  # the engine is only needed here
 
-    localizer = Localizer(floorplan, settings)
     estimates: list[Estimate] = []
-    with SessionWriter(path, settings, floorplan, metadata=metadata) as log:
+    with Localizer(floorplan, settings) as localizer, SessionWriter(path, settings, floorplan, metadata=metadata) as log:
         for index, frame in enumerate(frames):
             frame = log.write_frame(index, frame)
             est = localizer.push(frame)

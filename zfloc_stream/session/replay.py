@@ -166,6 +166,7 @@ def replay_session(
                 if divergence is not None:
                     break
     finally:
+        localizer.close()  # the logged pipeline mode may have started a worker
         if writer is not None:
             writer.close()
     if frames == 0:

@@ -62,6 +62,7 @@ def run_session(
     estimates: list[Estimate] = []
     truths: list = []
     with (
+        localizer,  # stops a pipelined round worker, also when a frame source fails
         TrajectoryCsvWriter(out_dir / "trajectory.csv") as csv_writer,
         TumWriter(out_dir / TUM_NAME if tum is None else tum) as tum_writer,
         SessionWriter(out_dir / "session.mcap", settings, floorplan) as log,

@@ -1,0 +1,183 @@
+"""Cost of a round by stage, and push latency inline vs pipelined (issue 10).
+
+Stages: every round of each case, run inline (so the round runs in the push that starts
+it and nothing else shares its time), wall (perf_counter) and CPU (thread_time of the
+thread that ran the stage; BLAS helper threads not counted) of primitives,
+model_estimation, scoring, refinement, tracking and their sum per round, and of fusion
+per fused frame (fusion + monitor: a push that neither starts nor applies a round);
+median and p95. Cases: built-in scenes (camera 160x120, laser), the shared real camera
+sessions (../shared/data/sessions/*/session.mcap against map.yaml beside it) at fixed,
+prior and free scale, and windows of a Carmen laser log localized against the map of the
+log without the window (as benchmarks/eval_real.py).
+
+Push latency: a 640x480 camera walk on a built-in scene, with labels and without (the
+geometric labeller labels each frame), median / p99 / max of the push wall time over all
+frames and max over the frames where a round starts or joins, inline vs pipelined (one
+worker thread; --process adds a worker process). Frames are rendered before timing.
+
+    python benchmarks/bench_round.py --quick        # a few minutes on 2 cores
+    python benchmarks/bench_round.py                # more scenes, frames and windows
+
+Measured on the shared 2-core machine under load average 6-7 from other jobs (so walls are
+~1.5x CPU), `--quick`: a round (wall median) takes 180 ms on the apartment camera, 340 ms on
+the office laser, 360-610 ms on the aces / belgioioso camera sessions (fixed, prior, free
+scale) and 500 ms on an Intel Carmen window; fusion 8 ms (camera 160x120), 1 ms (laser).
+Push latency, 640x480, 60 frames (`--quick --skip-stages --latency-frames 60 --rate R`):
+
+    rate   labels      mode               median   p99    max  (ms)
+    10 Hz  labels      inline               8.8   223    235
+    10 Hz  labels      pipelined thread     9.4    31     45
+    10 Hz  labels      pipelined process    8.8    22     34
+    10 Hz  geometric   inline              10.0   206    218
+    10 Hz  geometric   pipelined thread    13.8    53     57
+    10 Hz  geometric   pipelined process   10.8    27     38
+    30 Hz  labels      pipelined thread    12.2   155    164   (rounds longer than 5 frames: joins wait)
+
+At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
+pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
+or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
+worker (CPU and GIL), not the start / join frames (max 13-18 ms at 10 Hz).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from zfloc_stream.config import load_settings
+from zfloc_stream.datasets.carmen import carmen_sequence
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.localizer import Localizer
+from zfloc_stream.session import read_session
+from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+STAGES = ("fusion", "primitives", "model_estimation", "scoring", "refinement", "tracking", "round")
+
+
+def stage_times(floorplan, frames, settings) -> dict[str, tuple[list, list]]:
+    """{stage: (wall seconds, CPU seconds)} over the rounds (fusion: over the fused frames)."""
+    out: dict[str, tuple[list, list]] = defaultdict(lambda: ([], []))
+    with Localizer(floorplan, settings) as loc:
+        for frame in frames:
+            last = loc.last_round
+            c0 = time.thread_time()
+            est = loc.push(frame)
+            cpu = time.thread_time() - c0
+            if loc.last_round is not last:
+                r = loc.last_round
+                for k in r.timings:
+                    out[k][0].append(r.timings[k])
+                    out[k][1].append(r.cpu_timings.get(k, np.nan))
+                out["round"][0].append(sum(r.timings.values()))
+                out["round"][1].append(sum(r.cpu_timings.values()))
+            elif "fusion" in est.timings:
+                out["fusion"][0].append(est.timings["fusion"])
+                out["fusion"][1].append(cpu)
+    return out
+
+
+def print_stages(name: str, times: dict) -> None:
+    n = len(times.get("round", ([], []))[0])
+    cells = []
+    for stage in STAGES:
+        wall, cpu = (np.array(v) * 1000 for v in times.get(stage, ([], [])))
+        if len(wall):
+            cells.append(f"{stage} {np.median(wall):.1f}/{np.percentile(wall, 95):.1f} (cpu {np.nanmedian(cpu):.1f}/{np.nanpercentile(cpu, 95):.1f})")
+    print(f"{name:34s} rounds {n:3d} | " + " | ".join(cells), flush=True)
+
+
+def scene_cases(quick: bool):
+    frames = 40 if quick else 100
+    for name in ("apartment",) if quick else ("apartment", "office", "hall"):
+        scene = build_scene(name, seed=0)
+        yield f"scene {name} camera", scene.floorplan, simulate(scene, SimSettings(), seed=0, n_frames=frames).frames, []
+    scene = build_scene("office", seed=1)
+    yield "scene office laser", scene.floorplan, simulate_laser(scene, LaserSimSettings(), seed=1, n_frames=frames).frames, ["estimator.scale_mode=fixed"]
+
+
+def session_cases(quick: bool):
+    sessions = sorted((SHARED / "sessions").glob("*/session.mcap"))
+    if not sessions:
+        print(f"(no shared sessions under {SHARED / 'sessions'}: skipped)")
+    for path in sessions[:2] if quick else sessions:
+        frames = list(read_session(path).frames())
+        for mode in ("fixed", "prior", "free"):
+            overrides = [f"estimator.scale_mode={mode}"]
+            plan = Floorplan.load(path.parent / "map.yaml", settings=load_settings(overrides=overrides))
+            yield f"{path.parent.name} {mode}", plan, frames, overrides
+
+
+def carmen_cases(quick: bool):
+    log = SHARED / "carmen" / "intel-corrected.log.gz"
+    if not log.exists():
+        print(f"(no Carmen log {log}: skipped)")
+        return
+    overrides = ["estimator.scale_mode=fixed"]
+    seq = carmen_sequence(log, load_settings(overrides=overrides))
+    n, length = len(seq.ground_truth), 50
+    for start in [n // 3] if quick else np.linspace(0, n - length, 3).astype(int).tolist():
+        yield f"carmen intel [{start}, {start + length})", seq.floorplan_for(start, start + length), list(seq.frames(start, start + length)), overrides
+
+
+def push_latency(frames, floorplan, overrides, rate: float) -> dict:
+    """Push wall times with frames arriving at `rate` Hz (0: back to back), as from a camera:
+    the worker's time between arrivals is what pipelining puts to use."""
+    settings = load_settings(overrides=overrides)
+    walls, rounds, waits = [], [], []
+    with Localizer(floorplan, settings) as loc:
+        start = time.perf_counter()
+        for i, frame in enumerate(frames):
+            if rate > 0:
+                time.sleep(max(0.0, start + i / rate - time.perf_counter()))
+            t0 = time.perf_counter()
+            est = loc.push(frame)
+            walls.append(time.perf_counter() - t0)
+            if {"round_start", "round_wait", "model_estimation"} & est.timings.keys():
+                rounds.append(walls[-1])
+            waits.append(est.timings.get("round_wait", np.nan))
+    w, r = np.array(walls) * 1000, np.array(rounds) * 1000
+    return {"median": np.median(w), "p99": np.percentile(w, 99), "max": w.max(), "round_max": r.max() if len(r) else np.nan,
+            "wait_max": np.nanmax(np.array(waits) * 1000) if np.isfinite(waits).any() else 0.0}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="fewer cases and frames")
+    ap.add_argument("--process", action="store_true", help="also time a pipelined worker process")
+    ap.add_argument("--skip-stages", action="store_true", help="push latency only")
+    ap.add_argument("--latency-frames", type=int, default=None, help="640x480 frames per latency run (default 40 quick, 120)")
+    ap.add_argument("--rate", type=float, default=30.0, help="frames per second the latency runs feed (0: back to back)")
+    ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs (s; Python's default 0.005)")
+    ap.add_argument("--set", action="append", default=[], help="dotted.key=value for every run")
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
+    if not args.skip_stages:
+        for cases in (scene_cases, session_cases, carmen_cases):
+            for name, plan, frames, overrides in cases(args.quick):
+                print_stages(name, stage_times(plan, frames, load_settings(overrides=overrides + ["localizer.pipeline=inline"] + args.set)))
+
+    if args.switch_interval:  # how long a thread waiting for the GIL waits before asking for it
+        sys.setswitchinterval(args.switch_interval)
+    n = args.latency_frames or (40 if args.quick else 120)
+    scene = build_scene("apartment", seed=0)
+    modes = [("inline", ["localizer.pipeline=inline"]), ("pipelined thread", ["localizer.pipeline=pipelined"])]
+    if args.process:
+        modes.append(("pipelined process", ["localizer.pipeline=pipelined", "localizer.worker=process"]))
+    print(f"push latency, 640x480 camera, apartment, {n} frames at {args.rate:g} Hz, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms", flush=True)
+    for labels in (True, False):
+        frames = simulate(scene, SimSettings(width=640, height=480, use_labels=labels), seed=0, n_frames=n).frames
+        for mode, overrides in modes:
+            s = push_latency(frames, scene.floorplan, overrides + args.set, args.rate)
+            print(f"  {'labels' if labels else 'geometric labeller':18s} {mode:18s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  "
+                  f"max {s['max']:6.1f}  max on start/join frames {s['round_max']:6.1f}  longest join wait {s['wait_max']:6.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

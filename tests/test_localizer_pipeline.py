@@ -1,0 +1,156 @@
+"""Pipelined rounds (localizer.pipeline): a round started at frame i is applied exactly at
+frame i + round_delay, so a worker gives bit for bit what the same round computed inline
+and applied at the same frame ("delayed"); inline mode stays today's behaviour."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_localizer import _Kidnapped
+
+from zfloc_stream import localizer as localizer_module
+from zfloc_stream.config import load_settings
+from zfloc_stream.errors import ConfigError, InputError
+from zfloc_stream.localizer import Localizer
+from zfloc_stream.session import read_session, record_session
+from zfloc_stream.session.replay import replay_session, replay_settings
+from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
+from zfloc_stream.tools import cli, replay_cli
+
+
+def _settings(*overrides):
+    return load_settings(overrides=list(overrides))
+
+
+def _run(floorplan, frames, settings):
+    with Localizer(floorplan, settings) as loc:
+        return [loc.push(f) for f in frames]
+
+
+def _bits(est):
+    """Everything an estimate reports except its timings, as bytes / plain values."""
+    def b(a):
+        return None if a is None else np.asarray(a, dtype=float).tobytes()
+
+    alts = tuple((b(a.pose), b(a.weight), b(a.score), b(a.alignment.params())) for a in est.alternatives)
+    align = None if est.alignment is None else b(est.alignment.params())
+    return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped)  # bytes: NaN == NaN
+
+
+@pytest.fixture(scope="module")
+def kidnapped_camera():
+    """A camera run whose odometry jumps: the monitor asks for a global search mid-stream."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=60)
+    return scene.floorplan, list(_Kidnapped(seq, 30))
+
+
+@pytest.fixture(scope="module")
+def laser():
+    scene = build_scene("office", seed=1)
+    return scene.floorplan, list(simulate_laser(scene, LaserSimSettings(), seed=1, n_frames=30).frames)
+
+
+@pytest.mark.parametrize("delay", ["0", "3", "12"])  # 0 = every_k_frames; 12: rounds overlap
+def test_pipelined_equals_delayed_inline_bit_for_bit(kidnapped_camera, delay):
+    floorplan, frames = kidnapped_camera
+    delayed = _run(floorplan, frames, _settings("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
+    with Localizer(floorplan, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
+        piped = [loc.push(f) for f in frames]
+        assert loc._force_seq >= 1  # the monitor's global-search request crossed a pending round
+    assert [_bits(e) for e in piped] == [_bits(e) for e in delayed]
+    assert delayed[-1].pose is not None
+
+
+def test_a_worker_process_gives_the_same_bits(laser):
+    floorplan, frames = laser
+    delayed = _run(floorplan, frames, _settings("localizer.pipeline=delayed"))
+    piped = _run(floorplan, frames, _settings("localizer.pipeline=pipelined", "localizer.worker=process"))
+    assert [_bits(e) for e in piped] == [_bits(e) for e in delayed]
+
+
+def test_a_round_lands_exactly_at_its_join_frame(laser):
+    floorplan, frames = laser
+    k, delay = 5, 3
+    inline = _run(floorplan, frames, _settings())
+    piped = _run(floorplan, frames, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}"))
+    starts = [i for i in range(len(frames)) if (i + 1) % k == 0]
+    assert [i for i, e in enumerate(inline) if "model_estimation" in e.timings] == starts  # inline: in the starting push
+    assert [i for i, e in enumerate(piped) if "model_estimation" in e.timings] == [i + delay for i in starts if i + delay < len(frames)]
+    assert all("round_start" in piped[i].timings and "round_wait" in piped[i + delay].timings for i in starts[:-1])
+    # nothing is known before the first result lands; from then on every frame has a pose
+    first = starts[0] + delay
+    assert all(e.pose is None for e in piped[:first]) and all(e.pose is not None for e in piped[first:])
+    assert inline[starts[0]].pose is not None
+
+
+def test_inline_ignores_join_delay(laser):
+    floorplan, frames = laser
+    a = _run(floorplan, frames[:12], _settings())
+    b = _run(floorplan, frames[:12], _settings("localizer.join_delay=3"))
+    assert [_bits(e) for e in a] == [_bits(e) for e in b]
+
+
+def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkeypatch):
+    floorplan, frames = laser
+    settings = _settings("localizer.pipeline=pipelined")
+
+    def refuse(*args, **kwargs):
+        raise InputError("estimator refused this BEV")
+
+    monkeypatch.setattr(localizer_module, "localize", refuse)
+    est = _run(floorplan, frames[:15], settings)
+    assert all(e.pose is None and e.status == "initializing" for e in est)
+
+    def bug(*args, **kwargs):
+        raise RuntimeError("a bug in the round")
+
+    monkeypatch.setattr(localizer_module, "localize", bug)
+    with Localizer(floorplan, settings) as loc:
+        for f in frames[:9]:  # round started at frame 4, joined at 9
+            loc.push(f)
+        with pytest.raises(RuntimeError, match="a bug in the round"):
+            loc.push(frames[9])
+
+
+def test_close_stops_the_worker_and_drops_rounds_no_frame_reached(laser):
+    floorplan, frames = laser
+    loc = Localizer(floorplan, _settings("localizer.pipeline=pipelined"))
+    for f in frames[:7]:  # round started at frame 4 would land at frame 9
+        loc.push(f)
+    pool = loc._pool
+    assert pool is not None and len(loc._pending) == 1
+    loc.close()
+    assert loc._pool is None and not loc._pending and loc.last_round is None
+    assert pool._shutdown
+
+
+def test_bad_pipeline_settings_are_one_config_error_line():
+    for override, word in (("localizer.pipeline=sideways", "localizer.pipeline"), ("localizer.join_delay=-1", "localizer.join_delay"), ("localizer.worker=gpu", "localizer.worker")):
+        with pytest.raises(ConfigError) as err:
+            _settings(override)
+        assert word in str(err.value) and "\n" not in str(err.value)
+
+
+def test_replay_check_of_a_pipelined_session(laser, tmp_path):
+    floorplan, frames = laser
+    path = tmp_path / "piped.mcap"
+    settings = _settings("localizer.pipeline=pipelined", "localizer.join_delay=2")
+    logged = record_session(path, floorplan, frames, settings)
+    session = read_session(path)
+    again = replay_settings(session)
+    assert again.localizer.pipeline == "pipelined" and again.localizer.join_delay == 2  # replay uses the logged mode
+    result = replay_session(session, again, session.floorplan, check=True)
+    assert result.divergence is None and result.checked == len(frames)
+    assert [_bits(e) for e in result.estimates] == [_bits(e) for e in logged]
+
+
+def test_run_and_replay_cli_agree_on_a_pipelined_session(laser, tmp_path, capsys):
+    floorplan, frames = laser
+    source = tmp_path / "source.mcap"
+    record_session(source, floorplan, frames[:20], _settings())
+    plan = floorplan.write_ros(tmp_path / "plan")
+    out = tmp_path / "out"
+    args = ["run", "--floorplan", str(plan), "--input", str(source), "--out", str(out), "--set", "localizer.pipeline=pipelined", "--no-progress"]
+    assert cli.main(args + ["--set", "estimator.scale_mode=fixed"]) == 0
+    assert replay_cli.main([str(Path(out) / "session.mcap"), "--exact"]) == 0
