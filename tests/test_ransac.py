@@ -11,7 +11,7 @@ from test_scoring import RES, building, observe  # synthetic floorplan + BEV hel
 from zfloc_stream.config import Settings
 from zfloc_stream.errors import InputError
 from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
-from zfloc_stream.estimation.ransac import BevSamples, floorplan_matches, solver_pool
+from zfloc_stream.estimation.ransac import BevSamples, _guided_models, floorplan_matches, solver_pool
 from zfloc_stream.estimation.scoring import implied_poses
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.geometry import CircleSet, LineSet
@@ -150,12 +150,31 @@ def test_line_circle_pool(pillars):
 def test_warm_start_is_scored_and_refined(plain):
     fp, truth, obs = plain
     start = Sim2(truth.s * 1.02, truth.theta + 0.02, (truth.t[0] + 0.15, truth.t[1] - 0.1))
-    result = localize(fp, obs, CFG.estimator, make_rng(6, "t"), warm_start=[start], iterations=0)
+    unguided = CFG.estimator.model_copy(update={"ransac": CFG.estimator.ransac.model_copy(update={"guided_iterations": 0})})
+    result = localize(fp, obs, unguided, make_rng(6, "t"), warm_start=[start], iterations=0)
     assert result.n_models == 1 and len(result.hypotheses) == 1
     best = result.best
     assert best.solver == "warm"
     assert pose_error(best.alignment, truth)[0] < pose_error(start, truth)[0]
     assert pose_error(best.alignment, truth)[0] < 0.1
+
+
+
+@pytest.mark.parametrize("mode", ["free", "prior"])
+def test_guided_samples_stay_near_the_mode_and_correct_it(plain, mode):
+    fp, truth, obs = plain
+    cfg = CFG.estimator.model_copy(update={"scale_mode": mode})
+    prior = truth.s if mode == "prior" else 1.0
+    start = Sim2(truth.s, truth.theta + 0.03, (truth.t[0] + 0.25, truth.t[1] - 0.2))  # drifted mode
+    bev = BevSamples(obs, CFG.primitives.lines, cfg.solvers, CFG.floorplan.neighbour_distance)
+    models = _guided_models(bev, floorplan_matches(fp, cfg.solvers), start, 200, cfg, make_rng(3, "t"), prior)
+    assert len(models) > 50  # nearly every sample meets its own walls
+    errors = [pose_error(Sim2(m[3], m[2], (m[0], m[1])), truth) for m in models]
+    assert max(e[0] for e in errors) < CFG.estimator.ransac.guided_shift + pose_error(start, truth)[0]
+    assert min(e[0] for e in errors) < 0.05 and min(e[1] for e in errors) < 0.5  # the exact correction is among them
+    result = localize(fp, obs, cfg, make_rng(6, "t"), scale_prior=prior, warm_start=[start], iterations=0)
+    assert any(h.solver == "guided" for h in result.hypotheses)
+    assert pose_error(result.best.alignment, truth)[0] < 0.1
 
 
 def test_no_solver_applicable_gives_empty_result(plain):

@@ -468,7 +468,7 @@ def _guided_candidates(lines: LineSet, fp_lines: LineSet, warm: Sim2, cfg) -> tu
     direction = ends[:, 1] - ends[:, 0]
     direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
     aligned = np.abs(direction @ fp_lines.normals.T) < np.sin(np.deg2rad(cfg.guided_angle_deg))
-    offset = np.abs(np.einsum("nkd,md->nkm", ends, fp_lines.normals) - fp_lines.offsets[None, None, :]).max(axis=1)
+    offset = np.abs(np.einsum("nkd,md->nkm", ends, fp_lines.normals) + fp_lines.offsets[None, None, :]).max(axis=1)  # n.x + d = 0
     rows, cols = np.nonzero(aligned & (offset < cfg.guided_distance))
     starts = np.searchsorted(rows, np.arange(len(lines) + 1))
     return starts, cols
