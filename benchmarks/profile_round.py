@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import os
 import json
 import pstats
 import sys
@@ -84,8 +85,10 @@ def compare(a_path: Path, b_path: Path) -> int:
     a, b = json.loads(a_path.read_text()), json.loads(b_path.read_text())
     bad = 0
     for case in a:
-        fa, fb = a[case], b.get(case, [])
-        worst = 0.0
+        if case not in b:
+            continue
+        fa, fb = a[case], b[case]
+        worst, before = 0.0, bad
         for i, (x, y) in enumerate(zip(fa, fb)):
             if (x["status"], x["modes"], x["skipped"], x["pose"] is None) != (y["status"], y["modes"], y["skipped"], y["pose"] is None):
                 print(f"{case} frame {i}: {x} != {y}")
@@ -95,7 +98,7 @@ def compare(a_path: Path, b_path: Path) -> int:
         if len(fa) != len(fb):
             print(f"{case}: {len(fa)} vs {len(fb)} frames")
             bad += 1
-        print(f"{case}: {len(fa)} frames, decisions {'identical' if not bad else 'DIFFER'}, largest pose/scale difference {worst:.3g}")
+        print(f"{case}: {len(fa)} frames, decisions {'identical' if bad == before else 'DIFFER'}, largest pose/scale difference {worst:.3g}")
     return 1 if bad else 0
 
 
@@ -126,7 +129,7 @@ def main(argv=None) -> int:
             profiler.disable()
         print(summary(name, rounds(warm), cold_rounds[0]["round"] if cold_rounds else float("nan")) + f"\n  whole pass {seconds:.2f} s")
         if profiler:
-            pstats.Stats(profiler).sort_stats("tottime").print_stats(args.profile)
+            pstats.Stats(profiler).sort_stats(os.environ.get("SORT", "tottime")).print_stats(args.profile)
         if name in LASER or CAMERA[name][1] == "prior":
             all_warm += rounds(warm)
         dump[name] = record(warm)

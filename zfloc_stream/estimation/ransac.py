@@ -236,9 +236,14 @@ def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random
     if len(query) == 0:
         return query, np.zeros(0, dtype=np.int64)
     u = np.minimum((rng.random(len(query)) * n[query]).astype(np.int64), n[query] - 1)
-    cum = np.cumsum(sizes, axis=1)[query]
-    r = (u[:, None] >= cum).sum(axis=1)
-    before = cum[np.arange(len(query)), r] - sizes[query, r]
+    # r = the range holding draw u (the number of cumulative sizes <= u), found for all
+    # draws at once by one search in the rows' cumulative sizes laid end to end
+    cum = np.cumsum(sizes, axis=1)
+    R = sizes.shape[1]
+    big = int(n.max()) + 1
+    stacked = (cum + (np.arange(len(n), dtype=np.int64) * big)[:, None]).ravel()
+    r = np.searchsorted(stacked, query * big + u, side="right") - query * R
+    before = cum[query, r] - sizes[query, r]
     return query, starts[query, r] + (u - before)
 
 

@@ -163,14 +163,23 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     B = len(n)
     if B == 0:
         return _empty()
-    source = np.arange(B)
-    all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
     theta = _anchor_rotation(n, m)
-    u, se, cos = _signed_fp(theta, n, m, e)
-    ok = ~all_parallel & (cos[:, 1:] > settings.normal_consistency).all(axis=1)
-    if not ok.any():
+    # Normal consistency of lines 1 and 2 first (most samples fail it), with the same
+    # element-wise arithmetic as _signed_fp; everything else runs on the survivors only.
+    c, sn = np.cos(theta), np.sin(theta)
+    ok = np.ones(B, dtype=bool)
+    for i in (1, 2):
+        nx, ny = n[:, i, 0], n[:, i, 1]
+        cos_i = (c * nx - sn * ny) * m[:, i, 0] + (sn * nx + c * ny) * m[:, i, 1]
+        ok &= np.abs(cos_i) > settings.normal_consistency
+    source = np.flatnonzero(ok)
+    n, m, e, d, theta = n[source], m[source], e[source], d[source], theta[source]
+    all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
+    keep = ~all_parallel
+    if not keep.any():
         return _empty()
-    theta, u, se, d, source = theta[ok], u[ok], se[ok], d[ok], source[ok]
+    n, m, e, d, theta, source = n[keep], m[keep], e[keep], d[keep], theta[keep], source[keep]
+    u, se, _ = _signed_fp(theta, n, m, e)
     # rows: s d_i - u_i.t = sigma_i e_i  ->  A [s, tx, ty]^T = b, solved by Cramer's
     # rule (closed form: np.linalg on millions of 3x3 systems is several times slower)
     c0, c1, c2 = d, -u[..., 0], -u[..., 1]  # columns of A, each (B, 3)
