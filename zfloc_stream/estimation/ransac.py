@@ -55,7 +55,7 @@ from .correlative import correlative_models
 from ..ties import descending, tie_keys
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
-from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
+from .solvers import _angle as _line_angle, solve_2c, solve_2l, solve_3l, solve_3l_indexed, solve_lc
 
 WARM = "warm"
 CORRELATIVE = "correlative"
@@ -264,6 +264,7 @@ class FloorplanMatches:
         fp_cfg: FloorplanSettings = _settings_of(floorplan).floorplan
         self.lines: LineSet = floorplan.lines
         self.circles: CircleSet = floorplan.circles
+        self.line_angles = _line_angles(self.lines)  # for solve_3l_indexed
         tol = float(np.arccos(np.clip(solvers.normal_consistency, -1.0, 1.0)))
         par = np.deg2rad(solvers.parallel_angle_deg)
         alpha = _normal_angles(self.lines)
@@ -367,6 +368,11 @@ def _probabilities(weights: np.ndarray) -> np.ndarray | None:
 # --------------------------------------------------------------------------------------
 
 
+def _line_angles(lines: LineSet) -> np.ndarray:
+    """Angle of each line's normal, as the solvers compute it for a sample's anchor."""
+    return _line_angle(lines.normals)
+
+
 def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return np.mod(alpha[rows[:, 1:]] - alpha[rows[:, :1]], np.pi)
 
@@ -376,9 +382,11 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.triplets.rows[row]
-    return solve_3l(
-        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
-    )[0]
+    if cfg.scale_mode == "fixed":
+        return solve_3l(
+            bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
+        )[0]
+    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):

@@ -164,16 +164,40 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     if B == 0:
         return _empty()
     theta = _anchor_rotation(n, m)
-    # Normal consistency of lines 1 and 2 first (most samples fail it), with the same
-    # element-wise arithmetic as _signed_fp; everything else runs on the survivors only.
-    c, sn = np.cos(theta), np.sin(theta)
-    ok = np.ones(B, dtype=bool)
-    for i in (1, 2):
-        nx, ny = n[:, i, 0], n[:, i, 1]
-        cos_i = (c * nx - sn * ny) * m[:, i, 0] + (sn * nx + c * ny) * m[:, i, 1]
-        ok &= np.abs(cos_i) > settings.normal_consistency
+    ok = _normals_consistent(theta, n[:, 1:, 0], n[:, 1:, 1], m[:, 1:, 0], m[:, 1:, 1], settings)
     source = np.flatnonzero(ok)
-    n, m, e, d, theta = n[source], m[source], e[source], d[source], theta[source]
+    return _solve_3l_consistent(n[source], d[source], m[source], e[source], theta[source], source, settings)
+
+
+def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings) -> np.ndarray:
+    """|(R(theta) n_i).m_i| > normal_consistency for every column i of the (B, k) normal
+    components: the arithmetic of _signed_fp, element by element, so the same test."""
+    c, sn = np.cos(theta), np.sin(theta)
+    ok = np.ones(len(theta), dtype=bool)
+    for i in range(nx.shape[1]):
+        cos_i = (c * nx[:, i] - sn * ny[:, i]) * mx[:, i] + (sn * nx[:, i] + c * ny[:, i]) * my[:, i]
+        ok &= np.abs(cos_i) > settings.normal_consistency
+    return ok
+
+
+@_quiet
+def solve_3l_indexed(bev_lines, fp_lines, b: np.ndarray, f: np.ndarray, bev_angles, fp_angles, settings: SolverSettings = SolverSettings()):
+    """solve_3l (free / prior scale) for line index triplets b (into bev_lines) and f (into
+    fp_lines), with the normal angles of both line sets given (_angle of their normals):
+    the normal test runs on gathers of single components and only its survivors are
+    gathered in full. The same models as solve_3l on the gathered arrays, bit for bit."""
+    if len(b) == 0:
+        return _empty()
+    bn, fn = bev_lines.normals, fp_lines.normals
+    theta = fp_angles[f[:, 0]] - bev_angles[b[:, 0]]
+    ok = _normals_consistent(theta, bn[b[:, 1:], 0], bn[b[:, 1:], 1], fn[f[:, 1:], 0], fn[f[:, 1:], 1], settings)
+    source = np.flatnonzero(ok)
+    bs, fs = b[source], f[source]
+    return _solve_3l_consistent(bn[bs], bev_lines.offsets[bs], fn[fs], fp_lines.offsets[fs], theta[source], source, settings)
+
+
+def _solve_3l_consistent(n, d, m, e, theta, source, settings: SolverSettings):
+    """The rest of solve_3l for samples that passed the normal test."""
     all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
     keep = ~all_parallel
     if not keep.any():
