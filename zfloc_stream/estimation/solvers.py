@@ -166,7 +166,11 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     theta = _anchor_rotation(n, m)
     ok = _normals_consistent(theta, n[:, 1:, 0], n[:, 1:, 1], m[:, 1:, 0], m[:, 1:, 1], settings)
     source = np.flatnonzero(ok)
-    return _solve_3l_consistent(n[source], d[source], m[source], e[source], theta[source], source, settings)
+    n, d, m, e = n[source], d[source], m[source], e[source]
+    return _solve_3l_components(
+        [(n[:, k, 0], n[:, k, 1]) for k in range(3)], [d[:, k] for k in range(3)],
+        [(m[:, k, 0], m[:, k, 1]) for k in range(3)], [e[:, k] for k in range(3)], theta[source], source, settings,
+    )
 
 
 def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings) -> np.ndarray:
@@ -185,40 +189,71 @@ def solve_3l_indexed(bev_lines, fp_lines, b: np.ndarray, f: np.ndarray, bev_angl
     """solve_3l (free / prior scale) for line index triplets b (into bev_lines) and f (into
     fp_lines), with the normal angles of both line sets given (_angle of their normals):
     the normal test runs on gathers of single components and only its survivors are
-    gathered in full. The same models as solve_3l on the gathered arrays, bit for bit."""
+    gathered, one contiguous array per component. The same models as solve_3l on the
+    gathered arrays, bit for bit."""
     if len(b) == 0:
         return _empty()
     bn, fn = bev_lines.normals, fp_lines.normals
     theta = fp_angles[f[:, 0]] - bev_angles[b[:, 0]]
     ok = _normals_consistent(theta, bn[b[:, 1:], 0], bn[b[:, 1:], 1], fn[f[:, 1:], 0], fn[f[:, 1:], 1], settings)
     source = np.flatnonzero(ok)
-    bs, fs = b[source], f[source]
-    return _solve_3l_consistent(bn[bs], bev_lines.offsets[bs], fn[fs], fp_lines.offsets[fs], theta[source], source, settings)
+    bs, fs = b[source].T, f[source].T
+    bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bn[:, 0], bn[:, 1], fn[:, 0], fn[:, 1]))
+    bd, fd = bev_lines.offsets, fp_lines.offsets
+    return _solve_3l_components(
+        [(bnx[i], bny[i]) for i in bs], [bd[i] for i in bs], [(fnx[i], fny[i]) for i in fs], [fd[i] for i in fs],
+        theta[source], source, settings,
+    )
 
 
-def _solve_3l_consistent(n, d, m, e, theta, source, settings: SolverSettings):
-    """The rest of solve_3l for samples that passed the normal test."""
-    all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
-    keep = ~all_parallel
+def _solve_3l_components(N, D, M, E, theta, source, settings: SolverSettings):
+    """The rest of solve_3l for samples that passed the normal test, on per-line
+    component arrays: N[k] = (nx, ny) and D[k] of BEV line k, M[k], E[k] of its floorplan
+    line. Element by element the arithmetic of _parallel, _signed_fp and _det3 (the
+    columns-of-A formulation below), so the models are the same to the bit."""
+    sin_par = np.sin(np.deg2rad(settings.parallel_angle_deg))
+
+    def parallel(a, b):
+        return np.abs(a[0] * b[1] - a[1] * b[0]) < sin_par
+
+    keep = ~(parallel(N[0], N[1]) & parallel(N[0], N[2]) & parallel(N[1], N[2]))
     if not keep.any():
         return _empty()
-    n, m, e, d, theta, source = n[keep], m[keep], e[keep], d[keep], theta[keep], source[keep]
-    u, se, _ = _signed_fp(theta, n, m, e)
+    if not keep.all():
+        N = [(x[keep], y[keep]) for x, y in N]
+        M = [(x[keep], y[keep]) for x, y in M]
+        D, E = [v[keep] for v in D], [v[keep] for v in E]
+        theta, source = theta[keep], source[keep]
+    c, sn = np.cos(theta), np.sin(theta)
+    # u_k = sigma_k m_k ~ R n_k, se_k = sigma_k e_k (as _signed_fp)
+    A1, A2, SE = [], [], []  # columns of A (minus u) and right-hand side, per row k
+    for (nx, ny), (mx, my), e in zip(N, M, E):
+        cos = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
+        sigma = np.where(cos < 0, -1.0, 1.0)
+        A1.append(-(sigma * mx))
+        A2.append(-(sigma * my))
+        SE.append(sigma * e)
     # rows: s d_i - u_i.t = sigma_i e_i  ->  A [s, tx, ty]^T = b, solved by Cramer's
     # rule (closed form: np.linalg on millions of 3x3 systems is several times slower)
-    c0, c1, c2 = d, -u[..., 0], -u[..., 1]  # columns of A, each (B, 3)
-    det = _det3(c0, c1, c2)
+    A0 = D
+    det = _det3_rows(A0, A1, A2)
     # Hadamard's bound: |det| <= product of row norms; a tiny ratio means (near) singular
-    row_norms = np.prod(np.sqrt(c0 * c0 + c1 * c1 + c2 * c2), axis=1)
+    norms = [np.sqrt(A0[k] * A0[k] + A1[k] * A1[k] + A2[k] * A2[k]) for k in range(3)]
+    row_norms = norms[0] * norms[1] * norms[2]
     regular = np.abs(det) > settings.singular_tolerance * np.maximum(row_norms, 1e-300)
     safe = np.where(regular, det, 1.0)
-    s = _det3(se, c1, c2) / safe
-    tx = _det3(c0, se, c2) / safe
-    ty = _det3(c0, c1, se) / safe
+    s = _det3_rows(SE, A1, A2) / safe
+    tx = _det3_rows(A0, SE, A2) / safe
+    ty = _det3_rows(A0, A1, SE) / safe
     flip = s < 0  # the R n_1 = -m_1 candidate: same t, theta + pi, -s
     theta = np.where(flip, theta + np.pi, theta)
     s = np.abs(s)
     return _pack(tx, ty, theta, s, regular & _scale_ok(s, settings), source)
+
+
+def _det3_rows(a, b, c):
+    """_det3 for columns given as three per-row arrays each (a[k] = a[:, k])."""
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - b[0] * (a[1] * c[2] - a[2] * c[1]) + c[0] * (a[1] * b[2] - a[2] * b[1])
 
 
 def _solve_two_lines(n, d, m, e, s, settings: SolverSettings, skip_scale_check: bool = False):
