@@ -26,11 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.datasets.carmen import carmen_sequence
-from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import read_session
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking")
@@ -38,8 +34,33 @@ LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35)}
 CAMERA = {"camera-prior": ("intel-camera-30", "prior"), "camera-free": ("intel-camera-30", "free")}
 
 
-def build_case(name: str):
+def package(prefix: str = "zfloc_stream"):
+    """The modules build_case needs, from the installed package or from a reference
+    checkout loaded under another name (--against)."""
+    import importlib
+
+    names = ("config", "datasets.carmen", "floorplan", "localizer", "session")
+    return [importlib.import_module(f"{prefix}.{n}") for n in names]
+
+
+def load_reference(checkout: Path, alias: str = "zfloc_ref") -> str:
+    """Import the zfloc_stream package of another checkout as `alias` (its imports are
+    relative), so old and new code run side by side in one process."""
+    import importlib.util
+
+    pkg = checkout / "zfloc_stream"
+    spec = importlib.util.spec_from_file_location(alias, pkg / "__init__.py", submodule_search_locations=[str(pkg)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[alias] = module
+    spec.loader.exec_module(module)
+    return alias
+
+
+def build_case(name: str, prefix: str = "zfloc_stream"):
     """(floorplan, frames, settings) of one case; built outside any timing."""
+    config, carmen, floorplan_mod, _, session = package(prefix)
+    load_settings, carmen_sequence, Floorplan, read_session = (
+        config.load_settings, carmen.carmen_sequence, floorplan_mod.Floorplan, session.read_session)
     if name in LASER:
         log, start, length = LASER[name]
         settings = load_settings(base_overrides={"estimator": {"scale_mode": "fixed"}})
@@ -55,6 +76,35 @@ def build_case(name: str):
 def run(floorplan, frames, settings):
     loc = Localizer(floorplan, settings)
     return [loc.push(f) for f in frames]
+
+
+def side_by_side(name: str, reference: str, passes: int) -> None:
+    """Reference and current code on the same case in one process, frame by frame
+    alternately (both warm: a first pass of each fills the caches), so a busy machine
+    slows both alike; per-round stage times are minima over the passes. Also checks that
+    both give the same statuses and bit-identical poses."""
+    cases = {"ref": build_case(name, reference), "new": build_case(name)}
+    classes = {"ref": package(reference)[3].Localizer, "new": Localizer}
+    times = {"ref": None, "new": None}
+    records = {}
+    for p in range(passes + 1):
+        locs = {k: classes[k](cases[k][0], cases[k][2]) for k in cases}
+        ests = {k: [] for k in cases}
+        for i in range(len(cases["new"][1])):
+            for k in (("ref", "new") if (i + p) % 2 == 0 else ("new", "ref")):
+                ests[k].append(locs[k].push(cases[k][1][i]))
+        for k in cases:
+            records[k] = record(ests[k])
+            if p > 0:
+                r = rounds(ests[k])
+                times[k] = r if times[k] is None else [{s: min(a[s], b[s]) for s in a} for a, b in zip(times[k], r)]
+    same = records["ref"] == records["new"]
+    print(f"{name}: {len(times['new'])} rounds, reference vs current, minimum of {passes} passes; "
+          f"statuses and poses {'IDENTICAL' if same else 'DIFFER'}")
+    for s in (*STAGES, "round"):
+        a, b = (np.array([r[s] for r in times[k]]) for k in ("ref", "new"))
+        print(f"  {s:17s} median {np.median(a):7.1f} -> {np.median(b):7.1f}   p95 {np.percentile(a, 95):7.1f} -> {np.percentile(b, 95):7.1f} ms")
+    return times
 
 
 def rounds(estimates) -> list[dict]:
@@ -109,9 +159,23 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="warm passes; each round's stage times are the minimum over them (a busy machine)")
     parser.add_argument("--dump", type=Path, help="write per-frame status + pose of every case here (JSON)")
     parser.add_argument("--compare", type=Path, nargs=2, metavar=("A", "B"))
+    parser.add_argument("--against", type=Path, metavar="CHECKOUT", help="run a reference checkout's code side by side (A/B)")
     args = parser.parse_args(argv)
     if args.compare:
         return compare(*args.compare)
+    if args.against:
+        reference = load_reference(args.against)
+        pooled = {"ref": [], "new": []}
+        for name in args.cases.split(","):
+            times = side_by_side(name, reference, max(1, args.repeat))
+            if name in LASER or CAMERA[name][1] == "prior":
+                for k in pooled:
+                    pooled[k] += [r["round"] for r in times[k]]
+        if pooled["new"]:
+            a, b = np.array(pooled["ref"]), np.array(pooled["new"])
+            print(f"metric prior/fixed, all rounds: median {np.median(a):.1f} -> {np.median(b):.1f} ms, "
+                  f"p95 {np.percentile(a, 95):.1f} -> {np.percentile(b, 95):.1f} ms")
+        return 0
     import zfloc_stream
 
     print(f"zfloc_stream from {Path(zfloc_stream.__file__).parent}")
