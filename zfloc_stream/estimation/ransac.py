@@ -191,6 +191,8 @@ class _AngleTable:
         key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
         order = np.argsort(key, kind="stable")
         self.rows = rows[order]
+        # the same rows, one contiguous int32 array per column (cheap gathers)
+        self.columns = [np.ascontiguousarray(self.rows[:, k], dtype=np.int32) for k in range(self.rows.shape[1])] if self.rows.ndim == 2 else []
         counts = np.bincount(key, minlength=self.n_bins**self.q)
         self.counts = counts
         self.start = np.cumsum(counts) - counts
@@ -381,11 +383,14 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
-    b, f = picks[q], fp.triplets.rows[row]
     if cfg.scale_mode == "fixed":
+        b, f = picks[q], fp.triplets.rows[row]
         return solve_3l(
             bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
         )[0]
+    # per-column int32 indices (the same lines as picks[q], rows[row]), cheaper to gather
+    b = [np.ascontiguousarray(picks[:, k], dtype=np.int32)[q] for k in range(3)]
+    f = [col[row] for col in fp.triplets.columns]
     return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
 
 

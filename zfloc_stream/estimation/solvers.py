@@ -78,9 +78,10 @@ def _wrap(theta: np.ndarray) -> np.ndarray:
 
 
 def _pack(tx, ty, theta, s, keep, source) -> tuple[np.ndarray, np.ndarray]:
-    models = np.stack([tx, ty, _wrap(theta), s], axis=-1)
-    keep = keep & np.isfinite(models).all(axis=-1)
-    return models[keep], source[keep]
+    theta = _wrap(theta)
+    keep = keep & np.isfinite(tx) & np.isfinite(ty) & np.isfinite(theta) & np.isfinite(s)
+    idx = np.flatnonzero(keep)
+    return np.stack([tx[idx], ty[idx], theta[idx], s[idx]], axis=-1), source[idx]
 
 
 def _scale_ok(s: np.ndarray, settings: SolverSettings) -> np.ndarray:
@@ -185,20 +186,27 @@ def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings) -> np.n
 
 
 @_quiet
-def solve_3l_indexed(bev_lines, fp_lines, b: np.ndarray, f: np.ndarray, bev_angles, fp_angles, settings: SolverSettings = SolverSettings()):
-    """solve_3l (free / prior scale) for line index triplets b (into bev_lines) and f (into
-    fp_lines), with the normal angles of both line sets given (_angle of their normals):
-    the normal test runs on gathers of single components and only its survivors are
+def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings: SolverSettings = SolverSettings()):
+    """solve_3l (free / prior scale) for samples given by line indices: b = (b0, b1, b2)
+    into bev_lines, f = (f0, f1, f2) into fp_lines (three index arrays each, or (B, 3)
+    arrays), with the normal angles of both line sets given (_angle of their normals).
+    The normal test runs on gathers of single components and only its survivors are
     gathered, one contiguous array per component. The same models as solve_3l on the
     gathered arrays, bit for bit."""
-    if len(b) == 0:
+    b = [np.asarray(v) for v in (b.T if isinstance(b, np.ndarray) else b)]
+    f = [np.asarray(v) for v in (f.T if isinstance(f, np.ndarray) else f)]
+    if len(b[0]) == 0:
         return _empty()
-    bn, fn = bev_lines.normals, fp_lines.normals
-    theta = fp_angles[f[:, 0]] - bev_angles[b[:, 0]]
-    ok = _normals_consistent(theta, bn[b[:, 1:], 0], bn[b[:, 1:], 1], fn[f[:, 1:], 0], fn[f[:, 1:], 1], settings)
+    bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bev_lines.normals[:, 0], bev_lines.normals[:, 1], fp_lines.normals[:, 0], fp_lines.normals[:, 1]))
+    theta = fp_angles[f[0]] - bev_angles[b[0]]
+    ok = _normals_consistent(
+        theta,
+        np.column_stack([bnx[b[1]], bnx[b[2]]]), np.column_stack([bny[b[1]], bny[b[2]]]),
+        np.column_stack([fnx[f[1]], fnx[f[2]]]), np.column_stack([fny[f[1]], fny[f[2]]]),
+        settings,
+    )
     source = np.flatnonzero(ok)
-    bs, fs = b[source].T, f[source].T
-    bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bn[:, 0], bn[:, 1], fn[:, 0], fn[:, 1]))
+    bs, fs = [v[source] for v in b], [v[source] for v in f]
     bd, fd = bev_lines.offsets, fp_lines.offsets
     return _solve_3l_components(
         [(bnx[i], bny[i]) for i in bs], [bd[i] for i in bs], [(fnx[i], fny[i]) for i in fs], [fd[i] for i in fs],
