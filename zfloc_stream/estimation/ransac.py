@@ -237,16 +237,17 @@ def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random
     query = np.repeat(np.arange(len(n)), k)
     if len(query) == 0:
         return query, np.zeros(0, dtype=np.int64)
-    u = np.minimum((rng.random(len(query)) * n[query]).astype(np.int64), n[query] - 1)
-    # r = the range holding draw u (the number of cumulative sizes <= u), found for all
-    # draws at once by one search in the rows' cumulative sizes laid end to end
+    nq = n[query]
+    u = np.minimum((rng.random(len(query)) * nq).astype(np.int64), nq - 1)
+    # The range r holding draw u (the number of cumulative sizes <= u), for all draws at
+    # once: one search in the rows' cumulative sizes laid end to end (row b shifted by
+    # b * big), which lands on position b * R + r; the table row is then
+    # starts[b, r] + u - (cum[b, r] - sizes[b, r]).
     cum = np.cumsum(sizes, axis=1)
-    R = sizes.shape[1]
     big = int(n.max()) + 1
-    stacked = (cum + (np.arange(len(n), dtype=np.int64) * big)[:, None]).ravel()
-    r = np.searchsorted(stacked, query * big + u, side="right") - query * R
-    before = cum[query, r] - sizes[query, r]
-    return query, starts[query, r] + (u - before)
+    base = np.arange(len(n), dtype=np.int64) * big
+    pos = np.searchsorted((cum + base[:, None]).ravel(), base[query] + u, side="right")
+    return query, u + (starts - cum + sizes).ravel()[pos]
 
 
 # --------------------------------------------------------------------------------------
