@@ -72,6 +72,7 @@ def _chunks(n_models: int, n_points: int, chunk_size: int):
 
 
 MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
+_CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk (four 1 MiB scratch buffers)
 
 
 @dataclass(frozen=True)
@@ -179,6 +180,9 @@ class FloorplanScorer:
         inv = 1.0 / self.resolution
         shift = max(16, int(255 * n).bit_length())  # the low part (sum of q <= 255 n) fits below bit `shift`
         packed = self._packed(shift)
+        # chunks of at most chunk_size elements, and at most _CACHE_CHUNK so the scratch
+        # buffers stay in cache (each model's value does not depend on the chunking)
+        chunk_size = min(chunk_size, _CACHE_CHUNK)
         step = max(1, chunk_size // max(n, 1))
         size = min(step, len(models)) * n
         # scratch buffers reused across chunks; every operation is the one the plain
