@@ -174,14 +174,18 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     )
 
 
-def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings) -> np.ndarray:
+def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings, c=None, sn=None, cos_out: list | None = None) -> np.ndarray:
     """|(R(theta) n_i).m_i| > normal_consistency for every column i of the (B, k) normal
-    components: the arithmetic of _signed_fp, element by element, so the same test."""
-    c, sn = np.cos(theta), np.sin(theta)
+    components: the arithmetic of _signed_fp, element by element, so the same test.
+    c, sn: cos and sin of theta when known; cos_out collects the signed cosines."""
+    if c is None:
+        c, sn = np.cos(theta), np.sin(theta)
     ok = np.ones(len(theta), dtype=bool)
     for i in range(nx.shape[1]):
         cos_i = (c * nx[:, i] - sn * ny[:, i]) * mx[:, i] + (sn * nx[:, i] + c * ny[:, i]) * my[:, i]
         ok &= np.abs(cos_i) > settings.normal_consistency
+        if cos_out is not None:
+            cos_out.append(cos_i)
     return ok
 
 
@@ -198,27 +202,35 @@ def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings:
     if len(b[0]) == 0:
         return _empty()
     bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bev_lines.normals[:, 0], bev_lines.normals[:, 1], fp_lines.normals[:, 0], fp_lines.normals[:, 1]))
-    theta = fp_angles[f[0]] - bev_angles[b[0]]
+    # The rotation depends on the anchor pair only: theta, cos and sin are computed once
+    # per (floorplan line, BEV line) pair and gathered (element-wise functions of the same
+    # theta: the same values as computing them per sample).
+    pair = f[0].astype(np.int64) * len(bev_angles) + b[0]
+    table = (fp_angles[:, None] - bev_angles[None, :]).ravel()
+    theta = table[pair]
+    c, sn = np.cos(table)[pair], np.sin(table)[pair]
+    cos12: list = []
     ok = _normals_consistent(
         theta,
         np.column_stack([bnx[b[1]], bnx[b[2]]]), np.column_stack([bny[b[1]], bny[b[2]]]),
         np.column_stack([fnx[f[1]], fnx[f[2]]]), np.column_stack([fny[f[1]], fny[f[2]]]),
-        settings,
+        settings, c, sn, cos12,
     )
     source = np.flatnonzero(ok)
     bs, fs = [v[source] for v in b], [v[source] for v in f]
     bd, fd = bev_lines.offsets, fp_lines.offsets
     return _solve_3l_components(
         [(bnx[i], bny[i]) for i in bs], [bd[i] for i in bs], [(fnx[i], fny[i]) for i in fs], [fd[i] for i in fs],
-        theta[source], source, settings,
+        theta[source], source, settings, c[source], sn[source], [v[source] for v in cos12],
     )
 
 
-def _solve_3l_components(N, D, M, E, theta, source, settings: SolverSettings):
+def _solve_3l_components(N, D, M, E, theta, source, settings: SolverSettings, c=None, sn=None, cos12=None):
     """The rest of solve_3l for samples that passed the normal test, on per-line
     component arrays: N[k] = (nx, ny) and D[k] of BEV line k, M[k], E[k] of its floorplan
     line. Element by element the arithmetic of _parallel, _signed_fp and _det3 (the
-    columns-of-A formulation below), so the models are the same to the bit."""
+    columns-of-A formulation below), so the models are the same to the bit. c, sn: cos
+    and sin of theta when known; cos12: the signed cosines of lines 1 and 2 when known."""
     sin_par = np.sin(np.deg2rad(settings.parallel_angle_deg))
 
     def parallel(a, b):
@@ -232,11 +244,19 @@ def _solve_3l_components(N, D, M, E, theta, source, settings: SolverSettings):
         M = [(x[keep], y[keep]) for x, y in M]
         D, E = [v[keep] for v in D], [v[keep] for v in E]
         theta, source = theta[keep], source[keep]
-    c, sn = np.cos(theta), np.sin(theta)
+        if c is not None:
+            c, sn = c[keep], sn[keep]
+        if cos12 is not None:
+            cos12 = [v[keep] for v in cos12]
+    if c is None:
+        c, sn = np.cos(theta), np.sin(theta)
     # u_k = sigma_k m_k ~ R n_k, se_k = sigma_k e_k (as _signed_fp)
     A1, A2, SE = [], [], []  # columns of A (minus u) and right-hand side, per row k
-    for (nx, ny), (mx, my), e in zip(N, M, E):
-        cos = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
+    for k, ((nx, ny), (mx, my), e) in enumerate(zip(N, M, E)):
+        if k > 0 and cos12 is not None:
+            cos = cos12[k - 1]
+        else:
+            cos = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
         sigma = np.where(cos < 0, -1.0, 1.0)
         A1.append(-(sigma * mx))
         A2.append(-(sigma * my))
