@@ -71,6 +71,11 @@ class _Spectrum:
     values: np.ndarray  # rfft2 of the padded mask (complex128)
     fft_shape: tuple[int, int]
     values32: np.ndarray | None = None  # the same in complex64, for the fast float32 pass
+    # The fast pass's transform: the padded mask wrapped onto a grid `pad` cells smaller
+    # per axis (circular correlation: what wraps around is zero padding on both sides,
+    # so every valid placement reads the same cells), complex64.
+    compact: np.ndarray | None = None
+    compact_shape: tuple[int, int] = (0, 0)
 
 
 def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
@@ -88,7 +93,11 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
         mask = np.pad(near, pad)
         fft_shape = (sfft.next_fast_len(mask.shape[0], real=True), sfft.next_fast_len(mask.shape[1], real=True))
         values = sfft.rfft2(mask, s=fft_shape)
-        cached[key] = (_Spectrum(values, fft_shape, values.astype(np.complex64)), mask.shape)
+        # rows / columns past the compact shape are bottom / right padding (zeros): s=
+        # crops them, which is the same as wrapping them onto the top / left padding
+        compact_shape = (sfft.next_fast_len(near.shape[0] + pad, real=True), sfft.next_fast_len(near.shape[1] + pad, real=True))
+        compact = sfft.rfft2(mask, s=compact_shape).astype(np.complex64)
+        cached[key] = (_Spectrum(values, fft_shape, values.astype(np.complex64), compact, compact_shape), mask.shape)
     spectrum, shape = cached[key]
     return spectrum, shape, origin - pad * cell
 
@@ -130,9 +139,12 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     placements share the boundary count than places are left): then the reference's
     np.argpartition decides which of them it keeps, and only the ones above the boundary
     (returned) are certain. None when the float32 pass cannot vouch for its counts."""
-    H, W = spectrum.fft_shape
     if n_i * n_j <= per_angle or n_i < per_angle:
         return None
+    H, W = spectrum.compact_shape
+    values = spectrum.compact
+    if n_i > H or n_j > W or side > min(H, W):  # placements would alias: the full grid
+        (H, W), values = spectrum.fft_shape, spectrum.values32
     template = np.zeros((side, side), dtype=np.float32)
     np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
     # the template is zero outside its side x side corner: transform only those rows
@@ -140,7 +152,7 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     # only the n_i rows of valid placements before its row transform
     spec = sfft.fft(sfft.rfft(template, n=W, axis=1), n=H, axis=0)
     np.conj(spec, out=spec)
-    spec *= spectrum.values32
+    spec *= values
     score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
     # the per_angle-th largest count is at least the per_angle-th largest row maximum
     row_max = score.max(axis=1)
