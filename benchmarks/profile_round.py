@@ -32,6 +32,9 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking")
 LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35)}
 CAMERA = {"camera-prior": ("intel-camera-30", "prior"), "camera-free": ("intel-camera-30", "free")}
+# the other shared camera sessions (not in the default run: bigger maps, 50 frames each)
+CAMERA.update({f"camera-{b}-{m}": (f"{b}-camera-50", m) for b in ("aces", "belgioioso", "fhw") for m in ("prior", "free")})
+DEFAULT = [*LASER, "camera-prior", "camera-free"]
 
 
 def package(prefix: str = "zfloc_stream"):
@@ -154,7 +157,7 @@ def compare(a_path: Path, b_path: Path) -> int:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--cases", default=",".join([*LASER, *CAMERA]))
+    parser.add_argument("--cases", default=",".join(DEFAULT), help=f"any of {', '.join([*LASER, *CAMERA])}")
     parser.add_argument("--profile", type=int, default=0, help="cProfile the warm pass; print this many functions")
     parser.add_argument("--repeat", type=int, default=1, help="warm passes; each round's stage times are the minimum over them (a busy machine)")
     parser.add_argument("--dump", type=Path, help="write per-frame status + pose of every case here (JSON)")
