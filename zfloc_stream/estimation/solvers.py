@@ -165,7 +165,7 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     if B == 0:
         return _empty()
     theta = _anchor_rotation(n, m)
-    ok = _normals_consistent(theta, n[:, 1:, 0], n[:, 1:, 1], m[:, 1:, 0], m[:, 1:, 1], settings)
+    ok = _normals_consistent(theta, [(n[:, i, 0], n[:, i, 1], m[:, i, 0], m[:, i, 1]) for i in (1, 2)], settings)
     source = np.flatnonzero(ok)
     n, d, m, e = n[source], d[source], m[source], e[source]
     return _solve_3l_components(
@@ -174,15 +174,16 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     )
 
 
-def _normals_consistent(theta, nx, ny, mx, my, settings: SolverSettings, c=None, sn=None, cos_out: list | None = None) -> np.ndarray:
-    """|(R(theta) n_i).m_i| > normal_consistency for every column i of the (B, k) normal
-    components: the arithmetic of _signed_fp, element by element, so the same test.
-    c, sn: cos and sin of theta when known; cos_out collects the signed cosines."""
+def _normals_consistent(theta, lines, settings: SolverSettings, c=None, sn=None, cos_out: list | None = None) -> np.ndarray:
+    """|(R(theta) n_i).m_i| > normal_consistency for every line i, lines = [(nx, ny, mx,
+    my), ...] (normal components, one array each): the arithmetic of _signed_fp, element
+    by element, so the same test. c, sn: cos and sin of theta when known; cos_out
+    collects the signed cosines."""
     if c is None:
         c, sn = np.cos(theta), np.sin(theta)
     ok = np.ones(len(theta), dtype=bool)
-    for i in range(nx.shape[1]):
-        cos_i = (c * nx[:, i] - sn * ny[:, i]) * mx[:, i] + (sn * nx[:, i] + c * ny[:, i]) * my[:, i]
+    for nx, ny, mx, my in lines:
+        cos_i = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
         ok &= np.abs(cos_i) > settings.normal_consistency
         if cos_out is not None:
             cos_out.append(cos_i)
@@ -210,12 +211,7 @@ def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings:
     theta = table[pair]
     c, sn = np.cos(table)[pair], np.sin(table)[pair]
     cos12: list = []
-    ok = _normals_consistent(
-        theta,
-        np.column_stack([bnx[b[1]], bnx[b[2]]]), np.column_stack([bny[b[1]], bny[b[2]]]),
-        np.column_stack([fnx[f[1]], fnx[f[2]]]), np.column_stack([fny[f[1]], fny[f[2]]]),
-        settings, c, sn, cos12,
-    )
+    ok = _normals_consistent(theta, [(bnx[b[i]], bny[b[i]], fnx[f[i]], fny[f[i]]) for i in (1, 2)], settings, c, sn, cos12)
     source = np.flatnonzero(ok)
     bs, fs = [v[source] for v in b], [v[source] for v in f]
     bd, fd = bev_lines.offsets, fp_lines.offsets
