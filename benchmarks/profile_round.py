@@ -30,11 +30,13 @@ from zfloc_stream.localizer import Localizer
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking")
-LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35)}
+LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35),
+         # optional (not in the default run)
+         "laser-intel": ("intel", 400, 50), "laser-belgioioso": ("belgioioso", 150, 35), "laser-orebro": ("orebro", 100, 35)}
 CAMERA = {"camera-prior": ("intel-camera-30", "prior"), "camera-free": ("intel-camera-30", "free")}
 # the other shared camera sessions (not in the default run: bigger maps, 50 frames each)
 CAMERA.update({f"camera-{b}-{m}": (f"{b}-camera-50", m) for b in ("aces", "belgioioso", "fhw") for m in ("prior", "free")})
-DEFAULT = [*LASER, "camera-prior", "camera-free"]
+DEFAULT = ["laser-aces", "laser-fhw", "camera-prior", "camera-free"]
 
 
 def package(prefix: str = "zfloc_stream"):
