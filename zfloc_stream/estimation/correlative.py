@@ -68,8 +68,14 @@ def _near_wall_mask(floorplan, cell: float, tolerance: float) -> tuple[np.ndarra
 
 @dataclass(frozen=True)
 class _Spectrum:
-    values: np.ndarray  # rfft2 of the padded mask
+    values: np.ndarray  # rfft2 of the padded mask (complex128)
     fft_shape: tuple[int, int]
+    values32: np.ndarray | None = None  # the same in complex64, for the fast float32 pass
+    # The fast pass's transform: the padded mask wrapped onto a grid `pad` cells smaller
+    # per axis (circular correlation: what wraps around is zero padding on both sides,
+    # so every valid placement reads the same cells), complex64.
+    compact: np.ndarray | None = None
+    compact_shape: tuple[int, int] = (0, 0)
 
 
 def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
@@ -86,9 +92,84 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
     if key not in cached:
         mask = np.pad(near, pad)
         fft_shape = (sfft.next_fast_len(mask.shape[0], real=True), sfft.next_fast_len(mask.shape[1], real=True))
-        cached[key] = (_Spectrum(sfft.rfft2(mask, s=fft_shape), fft_shape), mask.shape)
+        values = sfft.rfft2(mask, s=fft_shape)
+        # rows / columns past the compact shape are bottom / right padding (zeros): s=
+        # crops them, which is the same as wrapping them onto the top / left padding
+        compact_shape = (sfft.next_fast_len(near.shape[0] + pad, real=True), sfft.next_fast_len(near.shape[1] + pad, real=True))
+        compact = sfft.rfft2(mask, s=compact_shape).astype(np.complex64)
+        cached[key] = (_Spectrum(values, fft_shape, values.astype(np.complex64), compact, compact_shape), mask.shape)
     spectrum, shape = cached[key]
     return spectrum, shape, origin - pad * cell
+
+
+# Largest distance of a float32 correlation value from its integer (the count it stands
+# for) that the fast pass accepts; beyond it, the angle is recomputed in float64. Seen on
+# the real buildings: ~1e-4.
+_ROUNDING_SLACK = 0.25
+
+
+def _angle_template(local: np.ndarray, theta: float, cell: float, half: int) -> np.ndarray:
+    """Template cells (row, col) of the points rotated by theta."""
+    c, s = np.cos(theta), np.sin(theta)
+    rot = local @ np.array([[c, s], [-s, c]])  # R(theta) applied to each row
+    return np.floor(rot / cell).astype(np.int64) + half
+
+
+def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np.ndarray:
+    """The grid counts of every placement, rounded (float64, flat), computed as the
+    reference always has: the float64 array whose np.argpartition picks an angle's peaks."""
+    template = np.zeros(spectrum.fft_shape, dtype=np.float32)
+    np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
+    # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
+    score = sfft.irfft2(spectrum.values * np.conj(sfft.rfft2(template)), s=spectrum.fft_shape)[:n_i, :n_j]
+    return np.round(score).ravel()  # integer counts: FFT round-off never decides a tie
+
+
+def _exact_peaks(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int, per_angle: int) -> tuple[np.ndarray, np.ndarray]:
+    """(flat placement indices, counts) of one angle's peaks, exactly as the reference
+    search picks them (np.argpartition on the full float64 array, ties included)."""
+    score = _exact_scores(spectrum, ij, n_i, n_j)
+    best = np.argpartition(score, -per_angle)[-per_angle:] if len(score) > per_angle else np.arange(len(score))
+    return best, score[best]
+
+
+def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: int, per_angle: int):
+    """One angle's `per_angle` best placements from a float32 correlation: (flat indices,
+    counts, boundary count, tied). The set is the reference's exactly unless `tied` (more
+    placements share the boundary count than places are left): then the reference's
+    np.argpartition decides which of them it keeps, and only the ones above the boundary
+    (returned) are certain. None when the float32 pass cannot vouch for its counts."""
+    if n_i * n_j <= per_angle or n_i < per_angle:
+        return None
+    H, W = spectrum.compact_shape
+    values = spectrum.compact
+    if n_i > H or n_j > W or side > min(H, W):  # placements would alias: the full grid
+        (H, W), values = spectrum.fft_shape, spectrum.values32
+    template = np.zeros((side, side), dtype=np.float32)
+    np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
+    # the template is zero outside its side x side corner: transform only those rows
+    # (columns zero-padded by rfft), then the column transform; the inverse likewise keeps
+    # only the n_i rows of valid placements before its row transform
+    spec = sfft.fft(sfft.rfft(template, n=W, axis=1), n=H, axis=0)
+    np.conj(spec, out=spec)
+    spec *= values
+    score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
+    # the per_angle-th largest count is at least the per_angle-th largest row maximum
+    row_max = score.max(axis=1)
+    floor_count = np.round(np.partition(row_max, -per_angle)[-per_angle])
+    rows = np.flatnonzero(row_max >= floor_count - 0.5)
+    r, c = np.nonzero(score[rows] >= floor_count - 0.5)
+    cand = rows[r] * n_j + c
+    raw = score[rows[r], c].astype(np.float64)
+    counts = np.round(raw)
+    if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
+        return None
+    boundary = np.partition(counts, -per_angle)[-per_angle]
+    above = counts > boundary
+    at = counts == boundary
+    tied = int(above.sum() + at.sum()) > per_angle
+    keep = above if tied else (above | at)
+    return cand[keep], counts[keep], float(boundary), tied
 
 
 def correlative_models(
@@ -102,7 +183,14 @@ def correlative_models(
     peaks: int = 8,
 ) -> np.ndarray:
     """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
-    distinct (1 m at the points' centre, or 10 deg)."""
+    distinct (1 m at the points' centre, or 10 deg).
+
+    Each angle's per_angle best placements (np.argpartition of the float64 counts, as
+    correlative_models_reference) come from a float32 FFT instead; where an angle's
+    boundary count is shared by more placements than it keeps, which of them it keeps is
+    np.argpartition's choice, so that angle is recomputed the reference way whenever its
+    boundary count could matter (>= the count of the last distinct peak chosen). The
+    result is the reference's, bit for bit."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))
@@ -114,24 +202,43 @@ def correlative_models(
     spectrum, shape, mask_origin = _mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
     n_i, n_j = shape[0] - side + 1, shape[1] - side + 1  # placements with the template inside the mask
     per_angle = max(1, peaks)
-    counts, thetas, corners = [], [], []
-    for theta in np.deg2rad(np.arange(0.0, 360.0, angle_step_deg)):
-        c, s = np.cos(theta), np.sin(theta)
-        rot = local @ np.array([[c, s], [-s, c]])  # R(theta) applied to each row
-        ij = np.floor(rot / cell).astype(np.int64) + half
-        template = np.zeros(spectrum.fft_shape, dtype=np.float32)
-        np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
-        # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
-        score = sfft.irfft2(spectrum.values * np.conj(sfft.rfft2(template)), s=spectrum.fft_shape)[:n_i, :n_j]
-        score = np.round(score).ravel()  # integer counts: FFT round-off never decides a tie
-        best = np.argpartition(score, -per_angle)[-per_angle:] if len(score) > per_angle else np.arange(len(score))
-        i, j = np.divmod(best, n_j)
-        counts.append(score[best])
-        thetas.append(np.full(len(best), theta))
-        # template cell (half, half) holds the points' centre at its corner; placed at
-        # (i, j) that corner lies at mask cell (i + half, j + half)'s corner
-        corners.append(mask_origin + (np.column_stack([j, i]) + half - 0.5) * cell)
-    counts, thetas, corners = np.concatenate(counts), np.concatenate(thetas), np.concatenate(corners)
+    thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
+    found, templates, open_ties = [], [], {}
+    for a, theta in enumerate(thetas_grid):
+        ij = _angle_template(local, theta, cell, half)
+        templates.append(ij)
+        fast = _fast_peaks(spectrum, ij, side, n_i, n_j, per_angle)
+        if fast is None:
+            found.append(_exact_peaks(spectrum, ij, n_i, n_j, per_angle))
+            continue
+        best, counts, boundary, tied = fast
+        found.append((best, counts))
+        if tied:
+            open_ties[a] = boundary
+    while True:
+        chosen, last = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
+        # the last chosen count: candidates below it were never reached
+        reach = last if len(chosen[0]) >= peaks else -np.inf
+        pending = [a for a, boundary in open_ties.items() if boundary >= reach]
+        if not pending:
+            break
+        for a in pending:
+            found[a] = _exact_peaks(spectrum, templates[a], n_i, n_j, per_angle)
+            del open_ties[a]
+    t, thetas = chosen
+    return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
+
+
+def _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks):
+    """Greedy non-maximum suppression over every angle's peaks (best count first; ties
+    by angle, then position, CPU-independent): (translations, angles) of the chosen ones
+    and the count of the last one chosen."""
+    counts = np.concatenate([c for _, c in found]).astype(np.float64)
+    thetas = np.concatenate([np.full(len(b), th) for (b, _), th in zip(found, thetas_grid)])
+    i, j = np.divmod(np.concatenate([b for b, _ in found]).astype(np.int64), n_j)
+    # template cell (half, half) holds the points' centre at its corner; placed at
+    # (i, j) that corner lies at mask cell (i + half, j + half)'s corner
+    corners = mask_origin + (np.column_stack([j, i]) + half - 0.5) * cell
     c, s = np.cos(thetas), np.sin(thetas)
     t = corners - np.column_stack([c * centre[0] - s * centre[1], s * centre[0] + c * centre[1]])
     order = np.lexsort((t[:, 1], t[:, 0], thetas, -np.round(counts)))  # stable, CPU-independent ties
@@ -145,7 +252,37 @@ def correlative_models(
             if len(chosen) >= peaks:
                 break
     chosen = np.array(chosen, dtype=np.int64)
-    return np.column_stack([t[chosen], wrap_angle(thetas[chosen]), np.full(len(chosen), float(scale))])
+    last = float(counts[chosen[-1]]) if len(chosen) else -np.inf
+    return (t[chosen], thetas[chosen]), last
+
+
+def correlative_models_reference(
+    floorplan,
+    points: np.ndarray,
+    scale: float = 1.0,
+    *,
+    cell: float = 0.1,
+    angle_step_deg: float = 2.0,
+    tolerance: float = 0.15,
+    peaks: int = 8,
+) -> np.ndarray:
+    """correlative_models the plain way (one float64 FFT and np.argpartition per angle):
+    what the fast version must reproduce exactly (tests, benchmarks)."""
+    pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
+    if len(pts) < 3:
+        return np.zeros((0, 4))
+    centre = pts.mean(axis=0)
+    local = pts - centre
+    radius = float(np.linalg.norm(local, axis=1).max()) + cell
+    half = int(np.ceil(radius / cell)) + 1
+    side = 2 * half
+    spectrum, shape, mask_origin = _mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
+    n_i, n_j = shape[0] - side + 1, shape[1] - side + 1
+    per_angle = max(1, peaks)
+    thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
+    found = [_exact_peaks(spectrum, _angle_template(local, th, cell, half), n_i, n_j, per_angle) for th in thetas_grid]
+    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
+    return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
 
 
 def correlative_search(

@@ -55,7 +55,7 @@ from .correlative import correlative_models
 from ..ties import descending, tie_keys
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
-from .solvers import solve_2c, solve_2l, solve_3l, solve_lc
+from .solvers import _angle as _line_angle, solve_2c, solve_2l, solve_3l, solve_3l_indexed, solve_lc
 
 WARM = "warm"
 CORRELATIVE = "correlative"
@@ -193,6 +193,8 @@ class _AngleTable:
         key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
         order = np.argsort(key, kind="stable")
         self.rows = rows[order]
+        # the same rows, one contiguous int32 array per column (cheap gathers)
+        self.columns = [np.ascontiguousarray(self.rows[:, k], dtype=np.int32) for k in range(self.rows.shape[1])] if self.rows.ndim == 2 else []
         counts = np.bincount(key, minlength=self.n_bins**self.q)
         self.counts = counts
         self.start = np.cumsum(counts) - counts
@@ -237,11 +239,17 @@ def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random
     query = np.repeat(np.arange(len(n)), k)
     if len(query) == 0:
         return query, np.zeros(0, dtype=np.int64)
-    u = np.minimum((rng.random(len(query)) * n[query]).astype(np.int64), n[query] - 1)
-    cum = np.cumsum(sizes, axis=1)[query]
-    r = (u[:, None] >= cum).sum(axis=1)
-    before = cum[np.arange(len(query)), r] - sizes[query, r]
-    return query, starts[query, r] + (u - before)
+    nq = n[query]
+    u = np.minimum((rng.random(len(query)) * nq).astype(np.int64), nq - 1)
+    # The range r holding draw u (the number of cumulative sizes <= u), for all draws at
+    # once: one search in the rows' cumulative sizes laid end to end (row b shifted by
+    # b * big), which lands on position b * R + r; the table row is then
+    # starts[b, r] + u - (cum[b, r] - sizes[b, r]).
+    cum = np.cumsum(sizes, axis=1)
+    big = int(n.max()) + 1
+    base = np.arange(len(n), dtype=np.int64) * big
+    pos = np.searchsorted((cum + base[:, None]).ravel(), base[query] + u, side="right")
+    return query, u + (starts - cum + sizes).ravel()[pos]
 
 
 # --------------------------------------------------------------------------------------
@@ -261,6 +269,7 @@ class FloorplanMatches:
         fp_cfg: FloorplanSettings = _settings_of(floorplan).floorplan
         self.lines: LineSet = floorplan.lines
         self.circles: CircleSet = floorplan.circles
+        self.line_angles = _line_angles(self.lines)  # for solve_3l_indexed
         tol = float(np.arccos(np.clip(solvers.normal_consistency, -1.0, 1.0)))
         par = np.deg2rad(solvers.parallel_angle_deg)
         alpha = _normal_angles(self.lines)
@@ -364,6 +373,11 @@ def _probabilities(weights: np.ndarray) -> np.ndarray | None:
 # --------------------------------------------------------------------------------------
 
 
+def _line_angles(lines: LineSet) -> np.ndarray:
+    """Angle of each line's normal, as the solvers compute it for a sample's anchor."""
+    return _line_angle(lines.normals)
+
+
 def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return np.mod(alpha[rows[:, 1:]] - alpha[rows[:, :1]], np.pi)
 
@@ -372,10 +386,15 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
-    b, f = picks[q], fp.triplets.rows[row]
-    return solve_3l(
-        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
-    )[0]
+    if cfg.scale_mode == "fixed":
+        b, f = picks[q], fp.triplets.rows[row]
+        return solve_3l(
+            bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
+        )[0]
+    # per-column int32 indices (the same lines as picks[q], rows[row]), cheaper to gather
+    b = [np.ascontiguousarray(picks[:, k], dtype=np.int32)[q] for k in range(3)]
+    f = [col[row] for col in fp.triplets.columns]
+    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):

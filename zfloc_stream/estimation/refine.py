@@ -42,12 +42,18 @@ def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.n
     cell centres; outside the grid the edge value plus the distance to the grid), and its
     gradient (N, 2) (that of the bilinear interpolant; the outside term is left out), in
     one pass over the four neighbouring cells."""
+    value, gu, gv = _field_value_and_gradient_xy(floorplan, q[:, 0], q[:, 1])
+    return value, np.stack([gu, gv], axis=1)
+
+
+def _field_value_and_gradient_xy(floorplan, qx: np.ndarray, qy: np.ndarray):
+    """field_value_and_gradient for coordinates given as two arrays (any shape)."""
     grid = np.asarray(floorplan.distance_field)
     h, w = grid.shape
     field = grid.ravel()  # a view for the (C-contiguous) field: no copy per call
     res = float(floorplan.resolution)
-    u = (q[:, 0] - floorplan.origin[0]) / res - 0.5
-    v = (q[:, 1] - floorplan.origin[1]) / res - 0.5
+    u = (qx - floorplan.origin[0]) / res - 0.5
+    v = (qy - floorplan.origin[1]) / res - 0.5
     uc, vc = np.clip(u, 0.0, w - 1.0), np.clip(v, 0.0, h - 1.0)
     c0 = np.minimum(uc.astype(np.int64), w - 2)
     r0 = np.minimum(vc.astype(np.int64), h - 2)
@@ -61,7 +67,7 @@ def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.n
     gv = top - bottom
     gu = np.where(u == uc, gu, 0.0) / res
     gv = np.where(v == vc, gv, 0.0) / res
-    return value, np.stack([gu, gv], axis=1)
+    return value, gu, gv
 
 
 def huber_cost(r: np.ndarray, delta: float) -> np.ndarray:
@@ -117,14 +123,14 @@ def refine_batch(
         c, sn = np.cos(P[:, 2:3]), np.sin(P[:, 2:3])
         rx = s * (c * pts[:, 0] - sn * pts[:, 1])
         ry = s * (sn * pts[:, 0] + c * pts[:, 1])
-        q = np.stack([rx + P[:, 0:1], ry + P[:, 1:2]], axis=-1)
-        r, g = field_value_and_gradient(field, q.reshape(-1, 2))
-        r, g = r.reshape(rx.shape), g.reshape(*rx.shape, 2)
+        # the same values as stacking (x, y) and calling field_value_and_gradient, without
+        # the interleaved copies
+        r, gx, gy = _field_value_and_gradient_xy(field, rx + P[:, 0:1], ry + P[:, 1:2])
         J = np.empty((*rx.shape, n_par))
-        J[..., 0], J[..., 1] = g[..., 0], g[..., 1]
-        J[..., 2] = g[..., 1] * rx - g[..., 0] * ry
+        J[..., 0], J[..., 1] = gx, gy
+        J[..., 2] = gy * rx - gx * ry
         if free_scale:
-            J[..., 3] = g[..., 0] * rx + g[..., 1] * ry
+            J[..., 3] = gx * rx + gy * ry
         return r, J
 
     P = np.column_stack([models[ok, :3], log_s[ok]])

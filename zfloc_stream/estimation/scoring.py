@@ -72,6 +72,7 @@ def _chunks(n_models: int, n_points: int, chunk_size: int):
 
 
 MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
+_CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk (four 1 MiB scratch buffers)
 
 
 @dataclass(frozen=True)
@@ -139,6 +140,7 @@ class FloorplanScorer:
         coarse[[0, -1], :] = 255
         coarse[:, [0, -1]] = 255
         self.coarse_field = np.ascontiguousarray(coarse).ravel()
+        self._packed_fields: dict[int, np.ndarray] = {}
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
         # under a hypothesis' footprint are a few contiguous index ranges.
         walls = np.asarray(floorplan.sample_wall_points(), dtype=float).reshape(-1, 2)
@@ -152,6 +154,14 @@ class FloorplanScorer:
         counts = np.bincount(key, minlength=self.bucket_shape[0] * self.bucket_shape[1])
         self.bucket_start = np.concatenate([[0], np.cumsum(counts)])  # points of bucket b: [start[b], start[b + 1])
 
+    def _packed(self, shift: int) -> np.ndarray:
+        """The coarse grid as q + 2^shift * (q < 255) (int32 while it fits), cached."""
+        if shift not in self._packed_fields:
+            dtype = np.int32 if shift <= 22 else np.int64
+            q = self.coarse_field.astype(dtype)
+            self._packed_fields[shift] = q + np.where(self.coarse_field < 255, 1 << shift, 0).astype(dtype)
+        return self._packed_fields[shift]
+
     def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
         """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
         far from any wall), with ties broken by closeness: the value is
@@ -164,24 +174,54 @@ class FloorplanScorer:
         if len(points) == 0 or len(models) == 0:
             return out
         h, w = self.shape
+        n = len(points)
         px = np.asarray(points[:, 0], dtype=np.float32)
         py = np.asarray(points[:, 1], dtype=np.float32)
         inv = 1.0 / self.resolution
-        for sl in _chunks(len(models), len(points), chunk_size):
+        shift = max(16, int(255 * n).bit_length())  # the low part (sum of q <= 255 n) fits below bit `shift`
+        packed = self._packed(shift)
+        # chunks of at most chunk_size elements, and at most _CACHE_CHUNK so the scratch
+        # buffers stay in cache (each model's value does not depend on the chunking)
+        chunk_size = min(chunk_size, _CACHE_CHUNK)
+        step = max(1, chunk_size // max(n, 1))
+        size = min(step, len(models)) * n
+        # scratch buffers reused across chunks; every operation is the one the plain
+        # expressions below would do (same dtypes, same order), written in place:
+        #   col = clip(a * px - b * py + cu, 0, w - 1) -> int32
+        #   row = clip(b * px + a * py + cv, 0, h - 1) -> int32
+        f1, f2 = np.empty(size, np.float32), np.empty(size, np.float32)
+        icol, irow = np.empty(size, np.int32), np.empty(size, np.int32)
+        for sl in _chunks(len(models), n, chunk_size):
             m = models[sl]
+            k = len(m) * n
+            shape = (len(m), n)
+            b1, b2 = f1[:k].reshape(shape), f2[:k].reshape(shape)
+            col, row = icol[:k].reshape(shape), irow[:k].reshape(shape)
             # fold the grid's origin and resolution into the model: u, v in cell units
             a = (m[:, 3] * np.cos(m[:, 2]) * inv).astype(np.float32)[:, None]
             b = (m[:, 3] * np.sin(m[:, 2]) * inv).astype(np.float32)[:, None]
             cu = ((m[:, 0] - self.origin[0]) * inv).astype(np.float32)[:, None]
             cv = ((m[:, 1] - self.origin[1]) * inv).astype(np.float32)[:, None]
-            col = np.clip(a * px - b * py + cu, 0, w - 1).astype(np.int32)
-            row = np.clip(b * px + a * py + cv, 0, h - 1).astype(np.int32)
+            np.multiply(a, px, out=b1)
+            np.multiply(b, py, out=b2)
+            np.subtract(b1, b2, out=b1)
+            np.add(b1, cu, out=b1)
+            np.clip(b1, 0, w - 1, out=b1)
+            np.copyto(col, b1, casting="unsafe")
+            np.multiply(b, px, out=b1)
+            np.multiply(a, py, out=b2)
+            np.add(b1, b2, out=b1)
+            np.add(b1, cv, out=b1)
+            np.clip(b1, 0, h - 1, out=b1)
+            np.copyto(row, b1, casting="unsafe")
             row *= w
             row += col
-            q = self.coarse_field[row]
-            near = (q < 255).sum(axis=1)
-            spread = q.sum(axis=1, dtype=np.int64) / (255.0 * len(points))
-            out[sl] = (near - spread / (1.0 + 1.0 / len(points))) / len(points)
+            # one gather: q + 2^shift * (q < 255) per point, so one integer sum gives both
+            # the number of near points (high part) and the sum of q (low part)
+            total = packed.take(row).sum(axis=1, dtype=np.int64)
+            near = total >> shift
+            spread = (total & ((1 << shift) - 1)) / (255.0 * n)
+            out[sl] = (near - spread / (1.0 + 1.0 / n)) / n
         return out
 
     def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:

@@ -78,9 +78,10 @@ def _wrap(theta: np.ndarray) -> np.ndarray:
 
 
 def _pack(tx, ty, theta, s, keep, source) -> tuple[np.ndarray, np.ndarray]:
-    models = np.stack([tx, ty, _wrap(theta), s], axis=-1)
-    keep = keep & np.isfinite(models).all(axis=-1)
-    return models[keep], source[keep]
+    theta = _wrap(theta)
+    keep = keep & np.isfinite(tx) & np.isfinite(ty) & np.isfinite(theta) & np.isfinite(s)
+    idx = np.flatnonzero(keep)
+    return np.stack([tx[idx], ty[idx], theta[idx], s[idx]], axis=-1), source[idx]
 
 
 def _scale_ok(s: np.ndarray, settings: SolverSettings) -> np.ndarray:
@@ -163,29 +164,120 @@ def solve_3l(bev_normals, bev_offsets, fp_normals, fp_offsets, settings: SolverS
     B = len(n)
     if B == 0:
         return _empty()
-    source = np.arange(B)
-    all_parallel = _parallel(n[:, 0], n[:, 1], settings) & _parallel(n[:, 0], n[:, 2], settings) & _parallel(n[:, 1], n[:, 2], settings)
     theta = _anchor_rotation(n, m)
-    u, se, cos = _signed_fp(theta, n, m, e)
-    ok = ~all_parallel & (cos[:, 1:] > settings.normal_consistency).all(axis=1)
-    if not ok.any():
+    ok = _normals_consistent(theta, [(n[:, i, 0], n[:, i, 1], m[:, i, 0], m[:, i, 1]) for i in (1, 2)], settings)
+    source = np.flatnonzero(ok)
+    n, d, m, e = n[source], d[source], m[source], e[source]
+    return _solve_3l_components(
+        [(n[:, k, 0], n[:, k, 1]) for k in range(3)], [d[:, k] for k in range(3)],
+        [(m[:, k, 0], m[:, k, 1]) for k in range(3)], [e[:, k] for k in range(3)], theta[source], source, settings,
+    )
+
+
+def _normals_consistent(theta, lines, settings: SolverSettings, c=None, sn=None, cos_out: list | None = None) -> np.ndarray:
+    """|(R(theta) n_i).m_i| > normal_consistency for every line i, lines = [(nx, ny, mx,
+    my), ...] (normal components, one array each): the arithmetic of _signed_fp, element
+    by element, so the same test. c, sn: cos and sin of theta when known; cos_out
+    collects the signed cosines."""
+    if c is None:
+        c, sn = np.cos(theta), np.sin(theta)
+    ok = np.ones(len(theta), dtype=bool)
+    for nx, ny, mx, my in lines:
+        cos_i = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
+        ok &= np.abs(cos_i) > settings.normal_consistency
+        if cos_out is not None:
+            cos_out.append(cos_i)
+    return ok
+
+
+@_quiet
+def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings: SolverSettings = SolverSettings()):
+    """solve_3l (free / prior scale) for samples given by line indices: b = (b0, b1, b2)
+    into bev_lines, f = (f0, f1, f2) into fp_lines (three index arrays each, or (B, 3)
+    arrays), with the normal angles of both line sets given (_angle of their normals).
+    The normal test runs on gathers of single components and only its survivors are
+    gathered, one contiguous array per component. The same models as solve_3l on the
+    gathered arrays, bit for bit."""
+    b = [np.asarray(v) for v in (b.T if isinstance(b, np.ndarray) else b)]
+    f = [np.asarray(v) for v in (f.T if isinstance(f, np.ndarray) else f)]
+    if len(b[0]) == 0:
         return _empty()
-    theta, u, se, d, source = theta[ok], u[ok], se[ok], d[ok], source[ok]
+    bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bev_lines.normals[:, 0], bev_lines.normals[:, 1], fp_lines.normals[:, 0], fp_lines.normals[:, 1]))
+    # The rotation depends on the anchor pair only: theta, cos and sin are computed once
+    # per (floorplan line, BEV line) pair and gathered (element-wise functions of the same
+    # theta: the same values as computing them per sample).
+    pair = f[0].astype(np.int64) * len(bev_angles) + b[0]
+    table = (fp_angles[:, None] - bev_angles[None, :]).ravel()
+    theta = table[pair]
+    c, sn = np.cos(table)[pair], np.sin(table)[pair]
+    cos12: list = []
+    ok = _normals_consistent(theta, [(bnx[b[i]], bny[b[i]], fnx[f[i]], fny[f[i]]) for i in (1, 2)], settings, c, sn, cos12)
+    source = np.flatnonzero(ok)
+    bs, fs = [v[source] for v in b], [v[source] for v in f]
+    bd, fd = bev_lines.offsets, fp_lines.offsets
+    return _solve_3l_components(
+        [(bnx[i], bny[i]) for i in bs], [bd[i] for i in bs], [(fnx[i], fny[i]) for i in fs], [fd[i] for i in fs],
+        theta[source], source, settings, c[source], sn[source], [v[source] for v in cos12],
+    )
+
+
+def _solve_3l_components(N, D, M, E, theta, source, settings: SolverSettings, c=None, sn=None, cos12=None):
+    """The rest of solve_3l for samples that passed the normal test, on per-line
+    component arrays: N[k] = (nx, ny) and D[k] of BEV line k, M[k], E[k] of its floorplan
+    line. Element by element the arithmetic of _parallel, _signed_fp and _det3 (the
+    columns-of-A formulation below), so the models are the same to the bit. c, sn: cos
+    and sin of theta when known; cos12: the signed cosines of lines 1 and 2 when known."""
+    sin_par = np.sin(np.deg2rad(settings.parallel_angle_deg))
+
+    def parallel(a, b):
+        return np.abs(a[0] * b[1] - a[1] * b[0]) < sin_par
+
+    keep = ~(parallel(N[0], N[1]) & parallel(N[0], N[2]) & parallel(N[1], N[2]))
+    if not keep.any():
+        return _empty()
+    if not keep.all():
+        N = [(x[keep], y[keep]) for x, y in N]
+        M = [(x[keep], y[keep]) for x, y in M]
+        D, E = [v[keep] for v in D], [v[keep] for v in E]
+        theta, source = theta[keep], source[keep]
+        if c is not None:
+            c, sn = c[keep], sn[keep]
+        if cos12 is not None:
+            cos12 = [v[keep] for v in cos12]
+    if c is None:
+        c, sn = np.cos(theta), np.sin(theta)
+    # u_k = sigma_k m_k ~ R n_k, se_k = sigma_k e_k (as _signed_fp)
+    A1, A2, SE = [], [], []  # columns of A (minus u) and right-hand side, per row k
+    for k, ((nx, ny), (mx, my), e) in enumerate(zip(N, M, E)):
+        if k > 0 and cos12 is not None:
+            cos = cos12[k - 1]
+        else:
+            cos = (c * nx - sn * ny) * mx + (sn * nx + c * ny) * my
+        sigma = np.where(cos < 0, -1.0, 1.0)
+        A1.append(-(sigma * mx))
+        A2.append(-(sigma * my))
+        SE.append(sigma * e)
     # rows: s d_i - u_i.t = sigma_i e_i  ->  A [s, tx, ty]^T = b, solved by Cramer's
     # rule (closed form: np.linalg on millions of 3x3 systems is several times slower)
-    c0, c1, c2 = d, -u[..., 0], -u[..., 1]  # columns of A, each (B, 3)
-    det = _det3(c0, c1, c2)
+    A0 = D
+    det = _det3_rows(A0, A1, A2)
     # Hadamard's bound: |det| <= product of row norms; a tiny ratio means (near) singular
-    row_norms = np.prod(np.sqrt(c0 * c0 + c1 * c1 + c2 * c2), axis=1)
+    norms = [np.sqrt(A0[k] * A0[k] + A1[k] * A1[k] + A2[k] * A2[k]) for k in range(3)]
+    row_norms = norms[0] * norms[1] * norms[2]
     regular = np.abs(det) > settings.singular_tolerance * np.maximum(row_norms, 1e-300)
     safe = np.where(regular, det, 1.0)
-    s = _det3(se, c1, c2) / safe
-    tx = _det3(c0, se, c2) / safe
-    ty = _det3(c0, c1, se) / safe
+    s = _det3_rows(SE, A1, A2) / safe
+    tx = _det3_rows(A0, SE, A2) / safe
+    ty = _det3_rows(A0, A1, SE) / safe
     flip = s < 0  # the R n_1 = -m_1 candidate: same t, theta + pi, -s
     theta = np.where(flip, theta + np.pi, theta)
     s = np.abs(s)
     return _pack(tx, ty, theta, s, regular & _scale_ok(s, settings), source)
+
+
+def _det3_rows(a, b, c):
+    """_det3 for columns given as three per-row arrays each (a[k] = a[:, k])."""
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - b[0] * (a[1] * c[2] - a[2] * c[1]) + c[0] * (a[1] * b[2] - a[2] * b[1])
 
 
 def _solve_two_lines(n, d, m, e, s, settings: SolverSettings, skip_scale_check: bool = False):
