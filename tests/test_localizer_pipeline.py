@@ -34,7 +34,7 @@ def _bits(est):
 
     alts = tuple((b(a.pose), b(a.weight), b(a.score), b(a.alignment.params())) for a in est.alternatives)
     align = None if est.alignment is None else b(est.alignment.params())
-    return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped)  # bytes: NaN == NaN
+    return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped, est.round_skipped)  # bytes: NaN == NaN
 
 
 @pytest.fixture(scope="module")
@@ -101,6 +101,9 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
     monkeypatch.setattr(localizer_module, "localize", refuse)
     est = _run(floorplan, frames[:15], settings)
     assert all(e.pose is None and e.status == "initializing" for e in est)
+    # the reason lands on the join frame (round started at 4 -> 9, at 9 -> 14), nowhere else
+    assert [e.frame for e in est if e.round_skipped] == [9, 14]
+    assert all(e.round_skipped == "estimator error: estimator refused this BEV" for e in est if e.round_skipped)
 
     def bug(*args, **kwargs):
         raise RuntimeError("a bug in the round")
