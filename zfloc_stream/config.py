@@ -333,6 +333,13 @@ class LocalizerSettings(Section):
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
     monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
     monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
+    # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
+    # alignment that fits all of it can sit off where the sensor is now. After each round
+    # the tracked mode's alignment is refined (LM, its scale kept) on the wall hits of the
+    # last local_frames frames alone; poses use it while it fits those hits at least as well.
+    local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
+    local_max_shift: float = Field(1.0, gt=0, le=1000)  # m, a refinement that moves the recent hits farther in one round: refused
+    local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
     # Where a round runs (localizer.py). inline: inside the push of the frame that starts
     # it, applied at once (the reference: every published number and recorded session).
     # pipelined: on one worker beside the stream, applied exactly join_delay frames later

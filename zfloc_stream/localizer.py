@@ -35,9 +35,11 @@ import numpy as np
 from .backbones.perception import Perception, needs_backbones
 from .config import Settings
 from .errors import ZflocError
-from .estimate import Estimate
+from .estimate import Alternative, Estimate
 from .estimation import localize
 from .estimation.ransac import LocalizationResult
+from .estimation.refine import refine_batch
+from .estimation.scoring import floorplan_scorer
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
@@ -154,6 +156,8 @@ class Localizer:
         self._pending: deque[_Pending] = deque()  # rounds started, not yet applied, oldest first
         self._pool: Executor | None = None
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
+        self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
+        self._local: tuple[int, Sim2] | None = None  # (mode id, its alignment refined on the recent hits)
         lc = self.settings.localizer
         if lc.pipeline == "pipelined" and lc.worker == "process":
             self._executor().submit(int)  # start the process now: it takes a second or two to import
@@ -165,6 +169,7 @@ class Localizer:
         timings: dict[str, float] = {}
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
+            self._recent_hits.append(self.bev.last_wall_hits)
             self._monitor()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = []  # why rounds applied at this frame did not run
@@ -281,9 +286,34 @@ class Localizer:
         self.last_result = outcome.result
         t0, c0 = time.perf_counter(), time.thread_time()
         self.tracker.update(outcome.result.hypotheses, pending.plane_pose[:2], pending.job.index)
+        self._refine_locally()
         timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         outcome.cpu_timings["tracking"] = time.thread_time() - c0
         return None
+
+    def _refine_locally(self) -> None:
+        """The best mode's alignment refined on the recent wall hits (see LocalizerSettings):
+        started from the last local refinement of the same mode, so it follows the drift."""
+        lc, best = self.settings.localizer, self.tracker.best
+        hits = [h for h in self._recent_hits if len(h)]
+        if lc.local_frames == 0 or best is None or not hits:
+            self._local = None
+            return
+        points = np.concatenate(hits)
+        points = points[:: max(1, len(points) // lc.local_max_points)]
+        start = self._local[1] if self._local is not None and self._local[0] == best.id else best.alignment
+        est = self.settings.estimator
+        field = floorplan_scorer(self.floorplan, est.scoring).face_field
+        m = refine_batch(field, points, [[start.t[0], start.t[1], start.theta, start.s]], est.refine, "fixed")[0]
+        local = Sim2(m[3], m[2], (m[0], m[1]))
+
+        def fit(a: Sim2) -> float:
+            return float(np.mean(self.floorplan.distance(a.apply(points)) < lc.monitor_distance))
+
+        # a step from where it started (the drift of one round), never a jump elsewhere
+        shift = float(np.linalg.norm(local.apply(points.mean(axis=0)) - start.apply(points.mean(axis=0))))
+        keep = local.is_finite() and shift <= lc.local_max_shift and fit(local) >= fit(start)
+        self._local = (best.id, local) if keep else None
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
@@ -308,9 +338,13 @@ class Localizer:
             pose = cov = alignment = None
             score = float("nan")
         else:
-            alignment = best.alignment
+            local = self._local is not None and self._local[0] == best.id
+            alignment = self._local[1] if local else best.alignment
             pose = np.array(alignment.apply_pose(*plane_pose))
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
+        if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose
+            first = alternatives[0]
+            alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]
         return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped)
