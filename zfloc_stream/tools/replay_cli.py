@@ -28,7 +28,7 @@ EPILOG = """examples:
 --check compares decisions exactly (frame count, statuses, reported mode and the order of
 the alternatives, number of hypotheses, skipped frames and their reasons, which outputs
 exist) and numbers (poses, covariances, alignments, scores, weights, BEV log-odds) within
-replay.rtol / replay.atol (defaults 1e-9 / 1e-12): another CPU or BLAS may change their last
+replay.rtol / replay.atol (defaults 1e-7 / 1e-8): another CPU or BLAS may change their last
 bits. It prints the largest deviation per topic, and says when the session was recorded
 in another environment (versions, BLAS, SIMD features, CPU).
 
