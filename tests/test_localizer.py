@@ -146,3 +146,23 @@ def test_symmetric_over_seeds():
         seq = simulate(scene, SimSettings(), seed=seed, trajectory=path)
         _, est = _run(scene, seq)
         assert est[-1].status == "tracking"
+
+
+def test_a_floorplan_and_its_caches_are_freed_after_use():
+    """The estimator caches per floorplan in WeakKeyDictionaries: a cached value that
+    referred back to its floorplan kept every floorplan of a study alive (GBs)."""
+    import gc
+    import weakref
+
+    from zfloc_stream.floorplan import Floorplan
+
+    scene = build_scene("rooms", seed=0)
+    frames = list(simulate(scene, SimSettings(width=80, height=60), seed=0, n_frames=10))
+    fp = Floorplan.from_occupancy(scene.floorplan.occupied.copy(), scene.floorplan.resolution, scene.floorplan.origin, Settings())
+    with Localizer(fp, Settings()) as loc:
+        est = [loc.push(f) for f in frames]
+    assert est[-1].pose is not None  # the round ran, so every cache was filled
+    alive = weakref.ref(fp)
+    del fp, loc
+    gc.collect()
+    assert alive() is None

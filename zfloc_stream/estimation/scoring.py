@@ -123,7 +123,9 @@ class FloorplanScorer:
     for Cv), built once per floorplan object and settings."""
 
     def __init__(self, floorplan, settings: ScoringSettings):
-        self.floorplan = floorplan
+        # weak: the scorer is cached in a WeakKeyDictionary keyed by this floorplan, and a
+        # strong reference from the value would keep every floorplan (and its caches) alive
+        self._floorplan = weakref.ref(floorplan)
         self.face_field = FaceField.of(floorplan)
         field = self.face_field.distance_field
         self.shape = field.shape
@@ -232,7 +234,7 @@ class FloorplanScorer:
             return out
         for sl in _chunks(len(models), len(points), chunk_size):
             q = transform_points(models[sl], points)
-            f = self.floorplan.distance(q.reshape(-1, 2)).reshape(q.shape[:2])
+            f = self._floorplan().distance(q.reshape(-1, 2)).reshape(q.shape[:2])
             out[sl] = (f < tau_c).mean(axis=1)
         return out
 
