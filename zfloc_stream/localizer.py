@@ -37,7 +37,7 @@ from .config import Settings
 from .errors import ZflocError
 from .estimate import Alternative, Estimate
 from .estimation import localize
-from .estimation.ransac import LocalizationResult
+from .estimation.ransac import LocalizationResult, alignment_of, model_rows
 from .estimation.refine import refine_batch
 from .estimation.scoring import floorplan_scorer
 from .floorplan import Floorplan
@@ -304,16 +304,17 @@ class Localizer:
         start = self._local[1] if self._local is not None and self._local[0] == best.id else best.alignment
         est = self.settings.estimator
         field = floorplan_scorer(self.floorplan, est.scoring).face_field
-        m = refine_batch(field, points, [[start.t[0], start.t[1], start.theta, start.s]], est.refine, "fixed")[0]
-        local = Sim2(m[3], m[2], (m[0], m[1]))
-
-        def fit(a: Sim2) -> float:
-            return float(np.mean(self.floorplan.distance(a.apply(points)) < lc.monitor_distance))
-
+        local = alignment_of(refine_batch(field, points, model_rows([start]), est.refine, "fixed")[0])
         # a step from where it started (the drift of one round), never a jump elsewhere
-        shift = float(np.linalg.norm(local.apply(points.mean(axis=0)) - start.apply(points.mean(axis=0))))
-        keep = local.is_finite() and shift <= lc.local_max_shift and fit(local) >= fit(start)
+        centre = points.mean(axis=0)
+        shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
+        keep = local.is_finite() and shift <= lc.local_max_shift and self._explained(local, points) >= self._explained(start, points)
         self._local = (best.id, local) if keep else None
+
+    def _explained(self, alignment: Sim2, points: np.ndarray) -> float:
+        """Share of plane-frame wall points within monitor_distance of a floorplan wall."""
+        distances = self.floorplan.distance(alignment.apply(points))
+        return float(np.mean(distances < self.settings.localizer.monitor_distance))
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
@@ -322,8 +323,7 @@ class Localizer:
         if self.tracker.status != "tracking" or len(points) < cfg.monitor_min_points:
             return
         points = points[:: max(1, len(points) // cfg.monitor_max_points)]
-        distances = self.floorplan.distance(self.tracker.best.alignment.apply(points))
-        consistent = np.mean(distances < cfg.monitor_distance) >= cfg.monitor_min_consistency
+        consistent = self._explained(self.tracker.best.alignment, points) >= cfg.monitor_min_consistency
         self._inconsistent_frames = 0 if consistent else self._inconsistent_frames + 1
         if self._inconsistent_frames >= cfg.monitor_frames:
             self._inconsistent_frames = 0

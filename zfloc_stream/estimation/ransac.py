@@ -54,7 +54,7 @@ from ..sim2 import Sim2, wrap_angle
 from .correlative import correlative_models
 from ..ties import descending, tie_keys
 from .refine import refine_batch
-from .scoring import BevView, distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .scoring import BevView, distinct, floorplan_scorer, implied_poses, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .solvers import _angle as _line_angle, solve_2c, solve_2l, solve_3l, solve_3l_indexed, solve_lc
 
 WARM = "warm"
@@ -86,6 +86,16 @@ class LocalizationResult:
 # --------------------------------------------------------------------------------------
 # small geometry helpers
 # --------------------------------------------------------------------------------------
+
+
+def model_rows(alignments: Sequence[Sim2]) -> np.ndarray:
+    """(K, 4) model rows (tx, ty, theta, s), the layout solvers, scoring and LM work on."""
+    return np.array([[a.t[0], a.t[1], a.theta, a.s] for a in alignments], dtype=float).reshape(-1, 4)
+
+
+def alignment_of(model: np.ndarray) -> Sim2:
+    """The Sim2 of one model row (tx, ty, theta, s)."""
+    return Sim2(model[3], model[2], (model[0], model[1]))
 
 
 def _normal_angles(lines: LineSet) -> np.ndarray:
@@ -522,17 +532,16 @@ def _guided_models(bev: BevSamples, fp: FloorplanMatches, warm: Sim2, n: int, cf
         return models
     # the solvers also return the mirrored rotation of each sample: keep what is near the mode
     anchor = bev.lines.endpoints.reshape(-1, 2).mean(axis=0)  # compare where the BEV lands, not the raw translation
-    c, si = np.cos(models[:, 2]), np.sin(models[:, 2])
-    landed = np.stack([models[:, 3] * (c * anchor[0] - si * anchor[1]), models[:, 3] * (si * anchor[0] + c * anchor[1])], axis=1)
-    shift = np.linalg.norm(landed + models[:, :2] - warm.apply(anchor), axis=1)
-    near = (np.abs(wrap_angle(models[:, 2] - warm.theta)) < np.deg2rad(2 * r.guided_angle_deg)) & (shift < r.guided_shift)
+    landed, heading = implied_poses(models, anchor)
+    shift = np.linalg.norm(landed - warm.apply(anchor), axis=1)
+    near = (np.abs(wrap_angle(heading - warm.theta)) < np.deg2rad(2 * r.guided_angle_deg)) & (shift < r.guided_shift)
     return models[near]
 
 
 def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, cfg: EstimatorSettings) -> list[tuple]:
     """Refined, fully scored rows for the warm starts that no kept hypothesis stands for
     (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
-    models = np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm])
+    models = model_rows(warm)
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
     models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
     scores = score_hypotheses(floorplan, view, models, cfg.scoring)
@@ -603,7 +612,7 @@ def localize(
             blocks.append(m)
             labels += [name] * len(m)
     if warm:
-        blocks.append(np.array([[w.t[0], w.t[1], w.theta, w.s] for w in warm]))
+        blocks.append(model_rows(warm))
         labels += [WARM] * len(warm)
         guided_modes = warm[: cfg.ransac.guided_modes]
         per_mode = cfg.ransac.guided_iterations // max(1, len(guided_modes))
@@ -654,7 +663,7 @@ def localize(
         rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
     t3, c3 = time.perf_counter(), time.thread_time()
 
-    hypotheses = [Hypothesis(Sim2(m[3], m[2], (m[0], m[1])), float(c), float(a), float(v), label) for m, c, a, v, label in rows]
+    hypotheses = [Hypothesis(alignment_of(m), float(c), float(a), float(v), label) for m, c, a, v, label in rows]
     timings = {"model_estimation": t1 - t0, "scoring": t2 - t1, "refinement": t3 - t2}
     cpu = {"model_estimation": c1 - c0, "scoring": c2 - c1, "refinement": c3 - c2}
     return LocalizationResult(hypotheses, timings, int(len(models)), cpu)

@@ -417,14 +417,10 @@ class Session:
         for c, chunk in enumerate(self._chunk_indexes()):
             for pos, record in enumerate(self._chunk_messages(f, chunk)):
                 counted[0] += 1
-                ch = channels.get(record.channel_id)
-                if ch is None:
-                    if record.channel_id not in channels:
-                        self._fail(f"message on unknown channel {record.channel_id}")
-                    continue
-                got = self._decode(ch, record, ch.topic in stamp_only)
+                got = self._channel_message(channels, record, stamp_only)
                 if got is not None:
-                    yield ch.topic, got[0], _Ref((c, pos), got[1]), ch.metadata
+                    ch, stamp, msg = got
+                    yield ch.topic, stamp, _Ref((c, pos), msg), ch.metadata
 
     def _summary_channels(self) -> dict[int, _Channel | None]:
         if "channels" not in self._shared:
@@ -506,14 +502,21 @@ class Session:
                 if record.id not in channels:
                     channels[record.id] = self._channel(record, schemas, factory)
             elif isinstance(record, Message):
-                ch = channels.get(record.channel_id)
-                if ch is None:
-                    if record.channel_id not in channels:
-                        self._fail(f"message on unknown channel {record.channel_id}")
-                    continue
-                got = self._decode(ch, record, ch.topic in stamp_only)
+                got = self._channel_message(channels, record, stamp_only)
                 if got is not None:
-                    yield ch.topic, got[0], got[1], ch.metadata
+                    ch, stamp, msg = got
+                    yield ch.topic, stamp, msg, ch.metadata
+
+    def _channel_message(self, channels: dict, record: Message, stamp_only) -> tuple[_Channel, int, object | None] | None:
+        """(channel, stamp, message) of a message on a session topic; None for topics this
+        package does not read, unknown channels (a fault) and undecodable messages."""
+        ch = channels.get(record.channel_id)
+        if ch is None:
+            if record.channel_id not in channels:
+                self._fail(f"message on unknown channel {record.channel_id}")
+            return None
+        got = self._decode(ch, record, ch.topic in stamp_only)
+        return None if got is None else (ch, got[0], got[1])
 
     def _decode(self, ch: _Channel, record: Message, stamp_only: bool) -> tuple[int, object | None] | None:
         """(stamp, message) of a message record; the message is None with stamp_only (only
