@@ -114,7 +114,10 @@ class _Posed:
         self.T, self.truth = T, truth
 
 
-def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool, camera: bool = False) -> dict:
+def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool, camera: bool = False,
+               localize: bool = True) -> dict:
+    """One window's row. localize=False: the laser reference alone (it does not depend on
+    the localizer, so --reference-cache keeps it across runs)."""
     path = DATA / f"{log}-corrected.log.gz"
     stop = start + length
     row = {"log": log, "start": start, "length": length, "seed": seed, "sensor": "camera" if camera else "laser"}
@@ -139,8 +142,9 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
     seq = carmen_sequence(path, settings)
     floorplan = seq.floorplan_for(start, stop)
     frames = list(seq.frames(start, stop))
-    result, _ = localize_frames(floorplan, frames, settings)
-    row.update(result)
+    if localize:
+        result, _ = localize_frames(floorplan, frames, settings)
+        row.update(result)
     if reference:
         points = np.concatenate([laser_points(f) for f in frames])
         posed = [_Posed(f.T_odom_sensor, f.ground_truth) for f in frames]
@@ -180,6 +184,22 @@ def sensor_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     return "\n".join(lines)
 
 
+def _cache_key(job) -> str:
+    log, start, length, seed, overrides = job[:5]
+    return f"{log}/{start}/{length}/{seed}/" + ",".join(o for o in overrides if o.startswith("datasets."))
+
+
+def _read_cache(path: Path | None) -> dict:
+    return json.loads(path.read_text()) if path is not None and path.exists() else {}
+
+
+def _map(fn, jobs: list, workers: int) -> list:
+    if workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            return list(pool.map(fn, *zip(*jobs)))
+    return [fn(*job) for job in jobs]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--logs", default=",".join(LOGS))
@@ -192,7 +212,12 @@ def main(argv=None) -> int:
     parser.add_argument("--no-laser", action="store_true", help="skip the laser windows")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings override")
     parser.add_argument("--json", type=Path, help="write every window's row here")
+    parser.add_argument("--reference-cache", type=Path,
+                        help="laser reference rows read from / added to this JSON file (the reference does not depend on the localizer)")
+    parser.add_argument("--reference-only", action="store_true", help="only fill --reference-cache, then stop")
     args = parser.parse_args(argv)
+    if args.reference_only and args.reference_cache is None:
+        parser.error("--reference-only needs --reference-cache")
     logs = [s for s in args.logs.split(",") if s]
     lengths = [int(v) for v in args.lengths.split(",")]
     jobs = []
@@ -203,11 +228,21 @@ def main(argv=None) -> int:
                 for camera in [False] * (not args.no_laser) + [True] * args.camera:
                     jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
-    if args.workers > 1:
-        with ProcessPoolExecutor(args.workers) as pool:
-            rows = list(pool.map(run_window, *zip(*jobs)))
-    else:
-        rows = [run_window(*job) for job in jobs]
+    cache = _read_cache(args.reference_cache)
+    missing = [j for j in jobs if j[5] and not j[6] and _cache_key(j) not in cache] if args.reference_cache else []
+    rows = _map(run_window, [(*j, False) for j in missing], args.workers)
+    cache.update({_cache_key(j): {k: r[k] for k in r if k.startswith("ref_")} for j, r in zip(missing, rows)})
+    if args.reference_cache and missing:
+        args.reference_cache.write_text(json.dumps(cache, indent=1, sort_keys=True))
+    if args.reference_only:
+        print(f"{len(missing)} reference rows added to {args.reference_cache}", file=sys.stderr)
+        return 0
+    # cached laser references are not recomputed; camera references need the localizer's BEV
+    jobs = [(*j[:5], j[5] and (j[6] or _cache_key(j) not in cache), j[6]) for j in jobs]
+    rows = _map(run_window, jobs, args.workers)
+    for j, r in zip(jobs, rows):
+        if not r["sensor"] == "camera" and _cache_key(j) in cache:
+            r.update(cache[_cache_key(j)])
     print(table(rows, lengths, not args.no_reference))
     print(f"\n{len(rows)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     if args.json:

@@ -142,6 +142,9 @@ class RefineSettings(Section):
     tolerance: float = Field(1e-4, gt=0, le=1)  # stop: relative cost decrease, step or gradient below this
     initial_damping: float = Field(1e-3, gt=0, le=1e6)  # Levenberg-Marquardt lambda at the start
     damping_factor: float = Field(10.0, gt=1, le=1000)  # lambda divided by this after a good step, multiplied after a bad one
+    # m, residuals beyond this carry no weight (a truncated Huber loss): points of a room the
+    # map lacks, or clutter, stop pulling the fit. 0: plain Huber (every point pulls).
+    outlier_distance: float = Field(0.0, ge=0, le=100)
 
 
 class RansacSettings(Section):
@@ -262,6 +265,10 @@ class BevSettings(Section):
     azimuth_bin_deg: float = Field(0.5, ge=0.01, le=45)  # camera free space: one ray per azimuth bin
     crop_margin: float = Field(0.5, ge=0, le=100)  # m, observation is cropped to the known cells plus this margin
     trajectory_length: int = Field(10000, ge=1, le=1_000_000)  # plane poses kept (bounded memory)
+    # Odometry drifts, so evidence fused long ago sits where the drifted poses put it: a
+    # cell no frame touched (hit or ray) in the last memory_frames fused frames is left
+    # out of the observation (unknown again). 0: the grid remembers everything it holds.
+    memory_frames: int = Field(0, ge=0, le=1_000_000)
 
     _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
 
@@ -340,6 +347,8 @@ class LocalizerSettings(Section):
     local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
     local_max_shift: float = Field(1.0, gt=0, le=1000)  # m, a refinement that moves the recent hits farther in one round: refused
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
+    local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
+    local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
     # Where a round runs (localizer.py). inline: inside the push of the frame that starts
     # it, applied at once (the reference: every published number and recorded session).
     # pipelined: on one worker beside the stream, applied exactly join_delay frames later

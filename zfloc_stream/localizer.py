@@ -175,8 +175,13 @@ class Localizer:
         reasons = []  # why rounds applied at this frame did not run
         while self._pending and self._pending[0].join_at <= index:
             reasons.append(self._apply(self._pending.popleft(), timings))
-        if plane_pose is not None and self.frames_fused % self.settings.localizer.every_k_frames == 0:
+        lc = self.settings.localizer
+        if plane_pose is not None and self.frames_fused % lc.every_k_frames == 0:
             reasons.append(self._start_round(index, plane_pose, timings))
+        elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
+            t0 = time.perf_counter()
+            self._refine_locally()  # follow the drift between rounds too
+            timings["local_refinement"] = time.perf_counter() - t0
         round_skipped = "; ".join(r for r in reasons if r) or None
         return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped, round_skipped)
 
@@ -301,15 +306,20 @@ class Localizer:
             return
         points = np.concatenate(hits)
         points = points[:: max(1, len(points) // lc.local_max_points)]
-        start = self._local[1] if self._local is not None and self._local[0] == best.id else best.alignment
+        continuing = self._local is not None and self._local[0] == best.id
+        start = self._local[1] if continuing else best.alignment
         est = self.settings.estimator
         field = floorplan_scorer(self.floorplan, est.scoring).face_field
-        local = alignment_of(refine_batch(field, points, model_rows([start]), est.refine, "fixed")[0])
+        refine = est.refine.model_copy(update={"outlier_distance": lc.local_outlier_distance})
+        local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed")[0])
         # a step from where it started (the drift of one round), never a jump elsewhere
         centre = points.mean(axis=0)
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
         keep = local.is_finite() and shift <= lc.local_max_shift and self._explained(local, points) >= self._explained(start, points)
-        self._local = (best.id, local) if keep else None
+        if keep:
+            self._local = (best.id, local)
+        elif not continuing:  # a refused step keeps the last accepted local alignment
+            self._local = None
 
     def _explained(self, alignment: Sim2, points: np.ndarray) -> float:
         """Share of plane-frame wall points within monitor_distance of a floorplan wall."""

@@ -9,7 +9,9 @@ loss, and method="trf" with loss="huber" spends ~0.8 ms of per-iteration overhea
 itself. One LM step here is a batch of 4x4 solves on J^T W J for all hypotheses at once.
 Algorithm: weights w_i = min(1, delta / |r_i|) (the Huber IRLS weights), step
 (H + lambda diag H) dp = -g with H = J^T W J, g = J^T W r; a step is accepted only if the
-Huber cost decreases (lambda / factor), otherwise lambda * factor and retry.
+Huber cost decreases (lambda / factor), otherwise lambda * factor and retry. With
+refine.outlier_distance > 0 the loss is truncated there (weight 0 beyond it), so points
+that no floorplan wall explains (a room the map lacks, clutter) stop pulling the fit.
 
 The field is given by the caller: localize() passes the wall-SURFACE field
 (scoring.FaceField) rather than the floorplan's f^c, which is 0 inside thick walls and so
@@ -70,10 +72,11 @@ def _field_value_and_gradient_xy(floorplan, qx: np.ndarray, qy: np.ndarray):
     return value, gu, gv
 
 
-def huber_cost(r: np.ndarray, delta: float) -> np.ndarray:
-    """Huber loss summed over the last axis."""
-    a = np.abs(r)
-    return np.where(a <= delta, 0.5 * r * r, delta * (a - 0.5 * delta)).sum(axis=-1)
+def huber_cost(r: np.ndarray, delta: float, cutoff: float = 0.0) -> np.ndarray:
+    """Huber loss summed over the last axis; with cutoff > 0 each |r| is capped there first
+    (a truncated Huber: a point farther than cutoff from any wall costs the same wherever it is)."""
+    a = np.abs(r) if cutoff <= 0 else np.minimum(np.abs(r), cutoff)
+    return np.where(a <= delta, 0.5 * a * a, delta * (a - 0.5 * delta)).sum(axis=-1)
 
 
 def refine(
@@ -114,7 +117,7 @@ def refine_batch(
         ok &= (log_s >= lo) & (log_s <= hi)
     if len(pts) < 4 or not ok.any():
         return out
-    delta = settings.huber_delta
+    delta, cutoff = settings.huber_delta, settings.outlier_distance
     n_par = 4 if free_scale else 3
 
     def evaluate(P):
@@ -135,7 +138,7 @@ def refine_batch(
 
     P = np.column_stack([models[ok, :3], log_s[ok]])
     r, J = evaluate(P)
-    cost = huber_cost(r, delta)
+    cost = huber_cost(r, delta, cutoff)
     lam = np.full(len(P), settings.initial_damping)
     active = np.ones(len(P), dtype=bool)
     evaluations = 1
@@ -144,6 +147,8 @@ def refine_batch(
         ra, Ja = r[a], J[a]
         absr = np.abs(ra)
         w = np.where(absr <= delta, 1.0, delta / np.maximum(absr, 1e-300))
+        if cutoff > 0:
+            w = np.where(absr > cutoff, 0.0, w)
         WJt = (Ja * w[..., None]).transpose(0, 2, 1)
         H = WJt @ Ja  # J^T W J, (A, p, p)
         g = (WJt @ ra[..., None])[..., 0]  # J^T W r, (A, p)
@@ -159,7 +164,7 @@ def refine_batch(
         trial[:, 3] = np.clip(trial[:, 3], lo, hi) if free_scale else P[a, 3]
         r_new, J_new = evaluate(trial)
         evaluations += 1
-        cost_new = huber_cost(r_new, delta)
+        cost_new = huber_cost(r_new, delta, cutoff)
         better = (cost_new < cost[a]) & ~done
         converged = better & (
             (cost[a] - cost_new <= settings.tolerance * np.maximum(cost[a], 1e-12)) | (np.abs(step).max(axis=1) < settings.tolerance)

@@ -55,6 +55,8 @@ class _ScrollingGrid:
         self.logodds = np.zeros((n, n), dtype=np.float32)
         self.wall = np.zeros((n, n), dtype=np.uint16)
         self.hits = np.zeros((n, n), dtype=np.uint16)
+        self.seen = np.zeros((n, n), dtype=np.int32)  # stamp of the last frame that hit or freed the cell (0: never)
+        self.stamp = 0  # frames fused into this grid
 
     def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
         cx, cy = (int(np.floor(v / self.res)) for v in xy)
@@ -68,6 +70,7 @@ class _ScrollingGrid:
         self.logodds = _shifted(self.logodds, dy, dx)
         self.wall = _shifted(self.wall, dy, dx)
         self.hits = _shifted(self.hits, dy, dx)
+        self.seen = _shifted(self.seen, dy, dx)
         self.ix0 += dx
         self.iy0 += dy
 
@@ -176,7 +179,7 @@ class RollingBEV:
         g = self.grid
         pending = sum(f.depth.nbytes + (0 if f.labels is None else f.labels.nbytes) for f in self._pending)
         rays = sum(r.nbytes for r in self._ray_cache.values())
-        grid = g.logodds.nbytes + g.wall.nbytes + g.hits.nbytes
+        grid = g.logodds.nbytes + g.wall.nbytes + g.hits.nbytes + g.seen.nbytes
         return grid + pending + rays + self._trajectory.nbytes + self.gravity.buffered_bytes
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
@@ -189,10 +192,10 @@ class RollingBEV:
         g = self.grid
         if g.ix0 is None:
             raise InputError("BEV is empty: no frame fused yet")
-        arrays = (g.logodds, g.wall, g.hits)
+        arrays = (g.logodds, g.wall, g.hits, g.seen)
         if copy:
             arrays = tuple(a.copy() for a in arrays)
-        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings)
+        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings, g.stamp)
 
     # ------------------------------------------------------------------------------
     # lasers
@@ -337,6 +340,7 @@ class RollingBEV:
         g = self.grid
         self.last_wall_hits = wall_hits  # the localizer checks each frame against the tracked alignment
         g.centre_on(centre, self._slack)
+        g.stamp += 1
         hit_flat = g.unique_flat(hits)
         # free polygon, drawn on a crop around it only
         # (free_ends: (K, 2) polygon vertices ordered by angle around the centre)
@@ -356,9 +360,12 @@ class RollingBEV:
                 # in place on the crop (a view of the grid); the clamp touches only the crop
                 np.add(region, np.float32(b.logodds_free), out=region, where=mask.view(bool))
                 np.maximum(region, np.float32(b.logodds_min), out=region)
+                seen = g.seen[lo_c[1] : hi_c[1], lo_c[0] : hi_c[0]]
+                np.copyto(seen, np.int32(g.stamp), where=mask.view(bool))
         flat_lo = g.logodds.reshape(-1)
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
         _increment(g.hits, hit_flat)
+        g.seen.reshape(-1)[hit_flat] = g.stamp
         _increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
 
 
@@ -366,8 +373,8 @@ class BevSnapshot:
     """The grid of a RollingBEV at one frame and how to turn it into a BevObservation.
     Pure: the same snapshot and rng give the same observation on any thread or process."""
 
-    def __init__(self, logodds, wall, hits, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings):
-        self.logodds, self.wall, self.hits = logodds, wall, hits
+    def __init__(self, logodds, wall, hits, seen, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings, stamp: int):
+        self.logodds, self.wall, self.hits, self.seen, self.stamp = logodds, wall, hits, seen, stamp
         self.ix0, self.iy0 = ix0, iy0
         self.trajectory = trajectory
         self.settings = settings
@@ -380,9 +387,13 @@ class BevSnapshot:
             & (self.wall >= b.wall_min_ratio * self.hits)  # mostly seen as wall, not as clutter
             & (self.logodds > b.occupied_threshold)
         )
+        known = (self.logodds != 0) | (self.wall > 0)
+        if b.memory_frames:  # cells no recent frame touched are unknown again
+            recent = self.seen > self.stamp - b.memory_frames
+            wall &= recent
+            known &= recent
         if not wall.any():
             raise InputError("BEV has no wall points yet")
-        known = (self.logodds != 0) | (self.wall > 0)
         rows, cols = np.nonzero(known.any(axis=1))[0], np.nonzero(known.any(axis=0))[0]
         m = int(np.ceil(b.crop_margin / b.resolution))
         r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, n)
@@ -391,6 +402,9 @@ class BevSnapshot:
         wall = wall[r0:r1, c0:c1]
         free = lo < b.free_threshold
         occupied = (lo > b.occupied_threshold) | wall
+        if b.memory_frames:
+            free &= recent[r0:r1, c0:c1]
+            occupied &= recent[r0:r1, c0:c1]
         clearance = distance_transform_edt(~occupied) * b.resolution
         clearance = np.where(free, clearance, 0.0)
         origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
