@@ -234,3 +234,28 @@ def test_refinement_converges_without_scale_bias(plain):
     assert abs(np.rad2deg(wrap_angle(fitted.theta - truth.theta))) < 0.3
     fixed = refine(field, obs.wall_points, start, CFG.estimator.refine, scale_mode="fixed")
     assert fixed[3] == start[3]  # fixed scale is not touched
+
+
+def test_truncated_loss_ignores_walls_the_map_lacks():
+    # A map with one room; the scan also sees a wall 0.5 m beyond the room's right wall
+    # that the map lacks. Plain Huber lets those points pull the fit; with
+    # refine.outlier_distance they carry no weight and the true alignment stays put.
+    from zfloc_stream.config import RefineSettings
+    from zfloc_stream.estimation.refine import refine_batch
+    from zfloc_stream.floorplan import Floorplan
+
+    res = 0.05
+    grid = np.zeros((140, 200), dtype=bool)  # 10 m x 7 m: the bottom, left and right walls of a 9 x 6 m room
+    grid[10, 10:191] = True  # cell centres at 0.525 m: the points below lie on them
+    grid[10:131, 10] = grid[10:131, 190] = True
+    fp = Floorplan(grid, res, (0.0, 0.0))
+    t = np.linspace(0.6, 9.4, 200)
+    walls = np.concatenate([np.column_stack([t, np.full_like(t, 0.525)]), np.column_stack([np.full_like(t[:120], 0.525), np.linspace(0.6, 6.4, 120)]),
+                            np.column_stack([np.full_like(t[:120], 9.525), np.linspace(0.6, 6.4, 120)])])
+    lacking = np.column_stack([np.full(240, 9.925), np.linspace(0.6, 6.4, 240)])  # a wall the map does not have
+    points = np.concatenate([walls, lacking])
+    truth = np.array([[0.0, 0.0, 0.0, 1.0]])
+    plain = refine_batch(fp, points, truth, RefineSettings(), "fixed")[0]
+    robust = refine_batch(fp, points, truth, RefineSettings(outlier_distance=0.3), "fixed")[0]
+    assert abs(plain[0]) > 0.05  # pulled toward the unmapped wall
+    assert np.abs(robust[:3]).max() < 0.02

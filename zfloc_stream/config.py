@@ -125,6 +125,11 @@ class ScoringSettings(Section):
     tau_c: float = Field(0.1, gt=0, le=10)  # m, consistency threshold (paper)
     tau_v: float = Field(0.2, gt=0, le=10)  # m, violation threshold (paper)
     violation_weight: float = Field(1.0, ge=0, le=10)  # C = Cc - w * Cv (1 = the paper's C)
+    # Cv's denominator: "free", the paper's (floorplan wall points landing in observed free
+    # space), or "observed" (those landing in any observed cell, free or a BEV wall). Where
+    # the map's walls mostly land on seen walls, as at the truth, the paper's denominator is
+    # a handful of points (clutter, a door the map has closed) and Cv jumps to 0.4-0.6.
+    violation_per: Literal["free", "observed"] = "free"
     sparse_spacing: float = Field(0.25, gt=0, le=10)  # m, spacing of BEV line samples for the coarse pass
     max_sparse_points: int = Field(128, ge=1, le=1_000_000)  # ...widened so the coarse pass uses about this many points at most
     top_k: int = Field(50, ge=1, le=100_000)  # hypotheses re-ranked with the full score
@@ -269,6 +274,15 @@ class BevSettings(Section):
     # cell no frame touched (hit or ray) in the last memory_frames fused frames is left
     # out of the observation (unknown again). 0: the grid remembers everything it holds.
     memory_frames: int = Field(0, ge=0, le=1_000_000)
+    # Laser scans are matched to the BEV walls around them before they are fused
+    # (frontend/scan_match.py): the odometry drift between frames is corrected, so the map
+    # stays sharp. The correction applies to every later pose (plane_pose) as well.
+    scan_match: bool = False
+    scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
+    scan_match_max_points: int = Field(400, ge=10, le=1_000_000)  # hits used (evenly thinned)
+    scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
+    scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
+    scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)
 
     _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
 

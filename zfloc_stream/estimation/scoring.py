@@ -71,6 +71,7 @@ def _chunks(n_models: int, n_points: int, chunk_size: int):
 # --------------------------------------------------------------------------------------
 
 
+UNSEEN, FREE, DEEP_FREE, WALL = 0, 1, 2, 3  # BevView.state codes
 MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
 _CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk (four 1 MiB scratch buffers)
 
@@ -261,9 +262,10 @@ class FloorplanScorer:
         index = np.repeat(begin - (np.cumsum(length) - length), length) + np.arange(length.sum())
         return owner, index
 
-    def violation(self, models: np.ndarray, bev: "BevView", tau_v: float, chunk_size: int) -> np.ndarray:
+    def violation(self, models: np.ndarray, bev: "BevView", tau_v: float, chunk_size: int, per: str = "free") -> np.ndarray:
         """Cv: floorplan wall points under the mapped BEV footprint, pulled back into the
-        BEV by the inverse transform; of those in observed free space, the fraction whose
+        BEV by the inverse transform; of those in observed free space (per="free", the
+        paper) or in any observed cell, free or wall (per="observed"), the fraction whose
         clearance exceeds tau_v (precomputed per BEV cell in bev.state)."""
         models = np.asarray(models, dtype=float).reshape(-1, 4)
         out = np.zeros(len(models))
@@ -291,8 +293,9 @@ class FloorplanScorer:
             cell = np.clip(v, 0, h - 1).astype(np.int64) * w + np.clip(u, 0, w - 1).astype(np.int64)
             state = np.where(inside, flat_state[cell], 0)
             n = sl.stop - sl.start
-            n_free = np.bincount(owner, weights=state > 0, minlength=n)
-            n_bad = np.bincount(owner, weights=state > 1, minlength=n)
+            seen = (state == FREE) | (state == DEEP_FREE) if per == "free" else state > 0
+            n_free = np.bincount(owner, weights=seen, minlength=n)
+            n_bad = np.bincount(owner, weights=state == DEEP_FREE, minlength=n)
             out[sl] = np.where(n_free > 0, n_bad / np.maximum(n_free, 1), 0.0)
         return out
 
@@ -342,7 +345,7 @@ class BevView:
     """What the scores read from one BEV observation, computed once per localization."""
 
     wall_points: np.ndarray  # (N, 2)
-    state: np.ndarray  # (H, W) int8: 0 not observed free, 1 free, 2 free with clearance > tau_v
+    state: np.ndarray  # (H, W) int8: UNSEEN, FREE, DEEP_FREE (clearance > tau_v) or WALL (a BEV wall point's cell)
     origin_cells: np.ndarray  # (2,) BEV origin in cell units
     resolution: float
     centre: np.ndarray  # (2,) centre of a disc covering every free cell
@@ -363,6 +366,10 @@ class BevView:
         inner = cv2.erode(free.astype(np.uint8), disc, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
         deep = inner & (np.asarray(obs.clearance) > tau_v)
         state = (free.astype(np.int8) + deep).astype(np.int8)
+        cells = np.floor((np.asarray(obs.wall_points) - obs.origin) / obs.resolution).astype(np.int64)
+        h, w = state.shape
+        ok = (cells[:, 0] >= 0) & (cells[:, 0] < w) & (cells[:, 1] >= 0) & (cells[:, 1] < h)
+        state[cells[ok, 1], cells[ok, 0]] = WALL
         rows, cols = np.nonzero(free)
         if len(rows):
             lo = obs.origin + obs.resolution * np.array([cols.min(), rows.min()])
@@ -394,7 +401,7 @@ def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings:
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
     scorer = floorplan_scorer(floorplan, settings)
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
-    cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size)
+    cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size, settings.violation_per)
     return Scores(cc - settings.violation_weight * cv, cc, cv)
 
 

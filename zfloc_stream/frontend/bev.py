@@ -40,6 +40,7 @@ from ..observation import BevObservation
 from ..rng import make_rng
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
+from .scan_match import match_scan
 from .wallmask import refine_wall_points, upright_rotation
 
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
@@ -130,6 +131,8 @@ class RollingBEV:
         self.frames_fused = 0
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
+        # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
+        self._correction = (0.0, np.zeros(2))
 
     # ------------------------------------------------------------------------------
     # public API
@@ -146,7 +149,7 @@ class RollingBEV:
         """(x, y, yaw) of the frame's sensor in the plane frame (camera: optical axis yaw;
         laser: x axis yaw). Before gravity is frozen, a provisional gravity is used."""
         if isinstance(frame, LaserFrame):
-            return plane_pose(frame.T_odom_sensor, np.eye(3), "x")
+            return self._corrected(*plane_pose(frame.T_odom_sensor, np.eye(3), "x"))
         if isinstance(frame, CameraFrame):
             return plane_pose(frame.T_odom_cam, self.gravity.provisional_R(), "z")
         raise FrameError(f"plane_pose expects a CameraFrame or LaserFrame, got {type(frame).__name__}")
@@ -169,6 +172,7 @@ class RollingBEV:
         disagree); gravity and the trajectory stay."""
         self.grid = _ScrollingGrid(self.grid.n, self.grid.res)
         self.last_wall_hits = np.zeros((0, 2))
+        self._correction = (0.0, np.zeros(2))
 
     @property
     def pending_frames(self) -> int:
@@ -200,20 +204,63 @@ class RollingBEV:
     # ------------------------------------------------------------------------------
     # lasers
     def _add_laser(self, frame: LaserFrame) -> None:
-        x, y, yaw = plane_pose(frame.T_odom_sensor, np.eye(3), "x")
         T = frame.T_odom_sensor
         valid = frame.valid
         a, r = frame.angles, frame.ranges
         beams = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1) @ T[:3, :3].T  # odom directions
         hits = (beams[valid] * r[valid, None] + T[:3, 3])[:, :2]
+        flat = beams[:, :2] / np.maximum(np.linalg.norm(beams[:, :2], axis=1, keepdims=True), 1e-12)
+        odom = plane_pose(T, np.eye(3), "x")
+        if self.settings.bev.scan_match:
+            self._match(hits, odom)
+        # the odometry plane as corrected by scan matching (identity without it)
+        theta, t = self._correction
+        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        hits, flat = hits @ R.T + t, flat @ R.T
+        x, y, yaw = self._corrected(*odom)
         # free polygon: one vertex per beam (in beam order, whatever the mounting), stopping
         # short of the hit; no-returns give none
         centre = np.array([x, y])
         free_r = np.where(valid, np.maximum(r - self.settings.bev.free_margin, 0.0), 0.0)
-        flat = beams[:, :2] / np.maximum(np.linalg.norm(beams[:, :2], axis=1, keepdims=True), 1e-12)
         self._fuse(centre, centre + free_r[:, None] * flat, hits, hits, min_wall_points=1)
         self._record_pose((x, y, yaw))
         self.frames_fused += 1
+
+    def _corrected(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
+        """An odometry-plane pose in the plane frame the BEV is fused in (scan matching)."""
+        theta, t = self._correction
+        if theta == 0.0 and not t.any():
+            return x, y, yaw
+        c, s = np.cos(theta), np.sin(theta)
+        return float(c * x - s * y + t[0]), float(s * x + c * y + t[1]), float(yaw + theta)
+
+    def _match(self, hits_odom: np.ndarray, odom_pose) -> None:
+        """Scan matching: update the correction so this scan's hits lie on the BEV walls."""
+        g, b = self.grid, self.settings.bev
+        if g.ix0 is None or len(hits_odom) == 0:
+            return
+        theta, t = self._correction
+        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        hits = hits_odom @ R.T + t
+        centre = np.array(self._corrected(*odom_pose)[:2])
+        margin = 2 * b.scan_match_max_shift
+        lo = np.floor((hits.min(axis=0) - margin) / g.res).astype(int) - [g.ix0, g.iy0]
+        hi = np.ceil((hits.max(axis=0) + margin) / g.res).astype(int) - [g.ix0, g.iy0]
+        c0, r0 = np.clip(lo, 0, g.n)
+        c1, r1 = np.clip(hi, 0, g.n)
+        if c1 - c0 < 3 or r1 - r0 < 3:
+            return
+        wall = g.wall[r0:r1, c0:c1]
+        mask = (wall >= b.wall_min_observations) & (wall >= b.wall_min_ratio * g.hits[r0:r1, c0:c1]) & (g.logodds[r0:r1, c0:c1] > b.occupied_threshold)
+        origin = np.array([(g.ix0 + c0) * g.res, (g.iy0 + r0) * g.res])
+        step = match_scan(mask, origin, g.res, hits, centre, b)
+        if step is None:
+            return
+        dtheta, dt = step
+        # x' = R_d (x - c) + c + dt composed with the correction x -> R x + t
+        c, s = np.cos(dtheta), np.sin(dtheta)
+        Rd = np.array([[c, -s], [s, c]])
+        self._correction = (theta + dtheta, Rd @ (t - centre) + centre + dt)
 
     # ------------------------------------------------------------------------------
     # cameras
