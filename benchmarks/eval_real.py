@@ -15,7 +15,8 @@ spread evenly along the log (they may overlap on short logs). Each window:
   +-8 deg, 1.3 m high, 1% depth noise) rendered by the simulator in the map of the WHOLE
   log extruded into walls (sim.build_scene_from_floorplan), odometry drifting 2% of the
   step per axis + 0.3 deg per step, localized at the default metric prior against the
-  same held-out map; its reference searches the localizer's final BEV wall points;
+  same held-out map; its reference searches the localizer's final BEV wall points (and
+  places each frame by its plane pose as the BEV fused it);
 - success (F3Loc): all of the last 10 frames within 1 m. A failure is attributed to "no
   pose" (a last-10 frame without pose), "lost" (final status lost) or "wrong mode".
 
@@ -83,8 +84,12 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     truth = np.array([f.ground_truth for f in frames])
     t0 = time.perf_counter()
     localizer = Localizer(floorplan, settings)
-    estimates = [localizer.push(f) for f in frames]
+    estimates, plane_poses = [], []
+    for f in frames:
+        estimates.append(localizer.push(f))
+        plane_poses.append(localizer.bev.plane_pose(f))  # as fused (scan matching corrects the odometry)
     seconds = time.perf_counter() - t0
+    localizer.plane_poses = plane_poses
     errors = position_errors([e.pose for e in estimates], truth)
     row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),
            "final_status": estimates[-1].status,
@@ -109,6 +114,15 @@ def reference_row(floorplan, points, frames, yaw_of) -> dict:
     return {"ref_seconds": time.perf_counter() - t0, "ref_success": is_success(errors, 1.0), "ref_final_error": float(errors[-1])}
 
 
+def _plane_T(pose) -> np.ndarray:
+    """4x4 of a plane pose (x, y, yaw): the heading is the x axis."""
+    x, y, yaw = pose
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    T[:2, 3] = x, y
+    return T
+
+
 class _Posed:
     def __init__(self, T, truth):
         self.T, self.truth = T, truth
@@ -131,11 +145,12 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         row.update(result)
         if reference:
             obs = localizer.last_observation
-            posed = [_Posed(f.T_odom_cam, f.ground_truth) for f in frames]
+            # the BEV's frame: each frame's plane pose as the localizer fused it
+            posed = [_Posed(_plane_T(p), f.ground_truth) for p, f in zip(localizer.plane_poses, frames)]
             if obs is None:
                 row.update(ref_seconds=0.0, ref_success=False, ref_final_error=float("inf"))
-            else:  # camera z is the optical axis: heading from its ground-plane projection
-                row.update(reference_row(floorplan, obs.wall_points, posed, lambda T: np.arctan2(T[1, 2], T[0, 2])))
+            else:
+                row.update(reference_row(floorplan, obs.wall_points, posed, lambda T: np.arctan2(T[1, 0], T[0, 0])))
         return row
     base = {"estimator": {"scale_mode": "fixed"}}
     settings = load_settings(overrides=overrides, base_overrides=base).model_copy(update={"seed": seed})

@@ -73,7 +73,7 @@ def test_replay_check_of_a_range_warms_up_first(recorded, capsys):
 def test_divergence_is_reported_with_frame_topic_and_values(recorded, tmp_path, capsys):
     def edit(status):
         if status["frame"] == 17 and status["score"] is not None:
-            status["score"] += 1e-6
+            status["score"] += 1e-4  # beyond replay.rtol + atol (1e-5, 1e-6)
         return status
 
     _rewrite(recorded, tmp_path / "tampered.mcap", edit)
@@ -202,7 +202,7 @@ def test_one_ulp_passes_check_and_exact_reports_it(recorded, tmp_path, capsys):
     _rewrite(recorded, nudged, _nudge_status(frame + 3, ("covariance", 3)))
     assert main([str(nudged), "--check"]) == 0
     out = capsys.readouterr().out
-    assert "same decisions, numbers within rtol 1e-07 + atol 1e-08" in out, out
+    assert "same decisions, numbers within rtol 1e-05 + atol 1e-06" in out, out
     status_line = next(line for line in out.splitlines() if line.strip().startswith("/zfloc/status:"))
     assert f"at frame {frame + 3}, covariance.[3]" in status_line
     assert main([str(nudged), "--exact"]) == 1
@@ -213,15 +213,15 @@ def test_one_ulp_passes_check_and_exact_reports_it(recorded, tmp_path, capsys):
 def test_numbers_beyond_the_tolerance_diverge_and_the_tolerance_is_a_setting(recorded, tmp_path, capsys):
     def edit(status):
         if status["frame"] == 20 and status["scale"] is not None:
-            status["scale"] *= 1 + 1e-5
+            status["scale"] *= 1 + 1e-4  # 10 x replay.rtol
         return status
 
     _rewrite(recorded, tmp_path / "scaled.mcap", edit)
     assert main([str(tmp_path / "scaled.mcap"), "--check"]) == 1
     out = capsys.readouterr().out
     assert "DIVERGED at frame 20, /zfloc/status: scale: logged" in out and "> tolerance" in out
-    assert main([str(tmp_path / "scaled.mcap"), "--check", "--set", "replay.rtol=1e-4"]) == 0
-    assert "same decisions, numbers within rtol 0.0001" in capsys.readouterr().out
+    assert main([str(tmp_path / "scaled.mcap"), "--check", "--set", "replay.rtol=1e-3"]) == 0
+    assert "same decisions, numbers within rtol 0.001" in capsys.readouterr().out
 
 
 def test_a_changed_decision_is_a_divergence_at_its_frame(recorded, tmp_path, capsys):

@@ -274,15 +274,16 @@ class BevSettings(Section):
     # cell no frame touched (hit or ray) in the last memory_frames fused frames is left
     # out of the observation (unknown again). 0: the grid remembers everything it holds.
     memory_frames: int = Field(0, ge=0, le=1_000_000)
-    # Laser scans are matched to the BEV walls around them before they are fused
+    # Each frame's wall hits (laser or camera) are matched to the BEV walls around them before they are fused
     # (frontend/scan_match.py): the odometry drift between frames is corrected, so the map
     # stays sharp. The correction applies to every later pose (plane_pose) as well.
-    scan_match: bool = False
+    scan_match: bool = True
     scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
     scan_match_max_points: int = Field(400, ge=10, le=1_000_000)  # hits used (evenly thinned)
     scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
     scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
     scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)
+    scan_match_min_gain: float = Field(0.2, ge=0, lt=1)  # a correction must lower the hits' robust cost by this fraction
 
     _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
 
@@ -359,10 +360,10 @@ class LocalizerSettings(Section):
     # the tracked mode's alignment is refined (LM, its scale kept) on the wall hits of the
     # last local_frames frames alone; poses use it while it fits those hits at least as well.
     local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
-    local_max_shift: float = Field(1.0, gt=0, le=1000)  # m, a refinement that moves the recent hits farther in one round: refused
+    local_max_step: float = Field(0.1, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
-    local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
-    local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
+    local_every_k_frames: int = Field(1, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
+    local_outlier_distance: float = Field(0.3, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
     # Where a round runs (localizer.py). inline: inside the push of the frame that starts
     # it, applied at once (the reference: every published number and recorded session).
     # pipelined: on one worker beside the stream, applied exactly join_delay frames later
@@ -497,10 +498,12 @@ class ReplaySettings(Section):
     match exactly; numbers within atol + rtol * max(|logged|, |replayed|), because another
     CPU or BLAS may change their last bits (--exact: bit for bit). Never affects the estimates."""
 
-    # relative tolerance on logged numbers: chained LM refinements (the local refinement
-    # continues from its last result) carry a last-bit difference on into ~1e-9 relative
-    rtol: float = Field(1e-7, ge=0, le=1)
-    atol: float = Field(1e-8, ge=0, le=1)  # absolute tolerance (numbers near zero; a poorly constrained LM direction, e.g. along a corridor, moves ~1e-9 m)
+    # relative tolerance on logged numbers: chained LM fits (scan matching corrects every
+    # frame's pose from the last one's, the local refinement continues from its last
+    # result) carry a last-bit difference on; measured with a perturbed BLAS and numpy
+    # SIMD off: up to 4e-6 relative (2.7e-7 m on a lower-ranked hypothesis' pose)
+    rtol: float = Field(1e-5, ge=0, le=1)
+    atol: float = Field(1e-6, ge=0, le=1)  # absolute tolerance (numbers near zero; 1 micrometre)
 
 
 class BackboneSettings(Section):

@@ -158,6 +158,7 @@ class Localizer:
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
         self._local: tuple[int, Sim2] | None = None  # (mode id, its alignment refined on the recent hits)
+        self._local_frame = 0  # frames_fused at the last local refinement
         lc = self.settings.localizer
         if lc.pipeline == "pipelined" and lc.worker == "process":
             self._executor().submit(int)  # start the process now: it takes a second or two to import
@@ -315,7 +316,9 @@ class Localizer:
         # a step from where it started (the drift of one round), never a jump elsewhere
         centre = points.mean(axis=0)
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
-        keep = local.is_finite() and shift <= lc.local_max_shift and self._explained(local, points) >= self._explained(start, points)
+        frames = max(1, self.frames_fused - self._local_frame)
+        self._local_frame = self.frames_fused
+        keep = local.is_finite() and shift <= lc.local_max_step * frames and self._explained(local, points) >= self._explained(start, points)
         if keep:
             self._local = (best.id, local)
         elif not continuing:  # a refused step keeps the last accepted local alignment

@@ -151,7 +151,7 @@ class RollingBEV:
         if isinstance(frame, LaserFrame):
             return self._corrected(*plane_pose(frame.T_odom_sensor, np.eye(3), "x"))
         if isinstance(frame, CameraFrame):
-            return plane_pose(frame.T_odom_cam, self.gravity.provisional_R(), "z")
+            return self._corrected(*plane_pose(frame.T_odom_cam, self.gravity.provisional_R(), "z"))
         raise FrameError(f"plane_pose expects a CameraFrame or LaserFrame, got {type(frame).__name__}")
 
     @property
@@ -214,9 +214,7 @@ class RollingBEV:
         if self.settings.bev.scan_match:
             self._match(hits, odom)
         # the odometry plane as corrected by scan matching (identity without it)
-        theta, t = self._correction
-        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-        hits, flat = hits @ R.T + t, flat @ R.T
+        hits, flat = self._correct_points(hits), self._correct_points(flat, rotate_only=True)
         x, y, yaw = self._corrected(*odom)
         # free polygon: one vertex per beam (in beam order, whatever the mounting), stopping
         # short of the hit; no-returns give none
@@ -234,14 +232,22 @@ class RollingBEV:
         c, s = np.cos(theta), np.sin(theta)
         return float(c * x - s * y + t[0]), float(s * x + c * y + t[1]), float(yaw + theta)
 
+    def _correct_points(self, xy: np.ndarray, rotate_only: bool = False) -> np.ndarray:
+        theta, t = self._correction
+        if theta == 0.0 and not t.any():
+            return xy
+        c, s = np.cos(theta), np.sin(theta)
+        out = xy @ np.array([[c, s], [-s, c]])
+        return out if rotate_only else out + t
+
     def _match(self, hits_odom: np.ndarray, odom_pose) -> None:
-        """Scan matching: update the correction so this scan's hits lie on the BEV walls."""
+        """Scan matching: update the correction so this frame's wall hits (uncorrected
+        plane frame) lie on the BEV walls."""
         g, b = self.grid, self.settings.bev
         if g.ix0 is None or len(hits_odom) == 0:
             return
         theta, t = self._correction
-        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-        hits = hits_odom @ R.T + t
+        hits = self._correct_points(hits_odom)
         centre = np.array(self._corrected(*odom_pose)[:2])
         margin = 2 * b.scan_match_max_shift
         lo = np.floor((hits.min(axis=0) - margin) / g.res).astype(int) - [g.ix0, g.iy0]
@@ -346,8 +352,11 @@ class RollingBEV:
         obstacle = above & (height <= f.max_obstacle_height) & ~is_floor & (lab != CEILING)
         wall &= above
         sensor = plane_pose(T, R_plane, "z")
-        centre = np.array(sensor[:2])
         xy = pts[:, :2]
+        if self.settings.bev.scan_match:
+            self._match(xy[wall], sensor)
+        xy, sensor = self._correct_points(xy), self._corrected(*sensor)
+        centre = np.array(sensor[:2])
         # free space: rays to floor points end there, rays to walls stop free_margin short
         ray_end = is_floor | is_wall_label
         angles, ranges = self._azimuth_bins(centre, sensor[2], xy[ray_end], is_wall_label[ray_end])
