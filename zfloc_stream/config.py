@@ -279,7 +279,7 @@ class BevSettings(Section):
     # stays sharp. The correction applies to every later pose (plane_pose) as well.
     scan_match: bool = True
     scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
-    scan_match_max_points: int = Field(400, ge=10, le=1_000_000)  # hits used (evenly thinned)
+    scan_match_max_points: int = Field(200, ge=10, le=1_000_000)  # hits used (evenly thinned)
     scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
     scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
     scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)
@@ -357,8 +357,10 @@ class LocalizerSettings(Section):
     monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
-    # the tracked mode's alignment is refined (LM, its scale kept) on the wall hits of the
-    # last local_frames frames alone; poses use it while it fits those hits at least as well.
+    # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,
+    # its scale kept, a truncated Huber loss so walls the map lacks do not pull) on the wall
+    # hits of the last local_frames frames alone, continuing from the last accepted local
+    # fit; poses use it while it fits those hits at least as well.
     local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
     local_max_step: float = Field(0.1, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)

@@ -46,11 +46,14 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     if wall_mask.sum() < settings.scan_match_min_walls or len(hits) < settings.scan_match_min_walls:
         return None
     # distance (m) from every crop cell to the nearest wall cell, about the sensor
-    field = cv2.distanceTransform(np.where(wall_mask, 0, 1).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    # (the 3x3 L2 approximation: a few percent off the exact distance, 4x cheaper on a
+    # 600x600 crop, and the loss is cut at 2 x inlier_distance anyway)
+    field = cv2.distanceTransform((~wall_mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_3)
     grid = GridField(field.astype(np.float64) * resolution, np.asarray(crop_origin, float) - centre, resolution)
     points = thin_points(hits - centre, settings.scan_match_max_points)
     near = settings.scan_match_inlier_distance
-    refine = RefineSettings(huber_delta=0.5 * near, outlier_distance=2 * near, max_points=settings.scan_match_max_points)
+    refine = RefineSettings(huber_delta=0.5 * near, outlier_distance=2 * near, max_points=settings.scan_match_max_points,
+                            max_evaluations=15)  # a one-frame step from a good start converges in a few
     model = refine_batch(grid, points, np.array([[0.0, 0.0, 0.0, 1.0]]), refine, "fixed")[0]
     dt, dtheta = model[:2], float(model[2])
     if not np.isfinite(model).all() or np.hypot(*dt) > settings.scan_match_max_shift or abs(dtheta) > np.deg2rad(settings.scan_match_max_angle_deg):
