@@ -127,8 +127,7 @@ def test_camera_fusion_puts_walls_on_walls_and_memory_stays_flat():
     from frontend_scene import CameraFrame, camera_sequence, distance_to_true_walls, plane_to_world
 
     frames, T_odom_world = camera_sequence(make_rng(0, "bev-camera"), 12, noise=0.0015)
-    # plane_to_world assumes the plane frame is the raw (here perfect) odometry: no scan matching
-    bev = RollingBEV(load_settings(overrides=["bev.scan_match=false"]))
+    bev = RollingBEV(Settings())  # cameras are not scan matched by default: the plane frame is the odometry's
     for f in frames:
         bev.add(f)
     obs = bev.observation(make_rng(0, "obs"))
@@ -203,7 +202,7 @@ def test_scan_matching_keeps_the_map_sharp_under_drifting_odometry():
     # bev.scan_match each scan is matched to the walls fused so far, so the walls stay where
     # the first frame put them and the corrected pose follows the truth.
     def walk(scan_match):
-        bev = RollingBEV(load_settings(overrides=[f"bev.scan_match={str(scan_match).lower()}"]))
+        bev = RollingBEV(load_settings(overrides=[f"bev.scan_match={'laser' if scan_match else 'none'}"]))
         drift = Sim2(1.0, 0.0)
         errors = []
         for i in range(30):

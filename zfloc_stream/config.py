@@ -274,10 +274,13 @@ class BevSettings(Section):
     # cell no frame touched (hit or ray) in the last memory_frames fused frames is left
     # out of the observation (unknown again). 0: the grid remembers everything it holds.
     memory_frames: int = Field(0, ge=0, le=1_000_000)
-    # Each frame's wall hits (laser or camera) are matched to the BEV walls around them before they are fused
+    # Each frame's wall hits are matched to the BEV walls around them before they are fused
     # (frontend/scan_match.py): the odometry drift between frames is corrected, so the map
-    # stays sharp. The correction applies to every later pose (plane_pose) as well.
-    scan_match: bool = True
+    # stays sharp. The correction applies to every later pose (plane_pose) as well. Which
+    # frames: "laser" (default; a scan sees all around), "all" (cameras too: with their
+    # narrow field of view and a perfect odometry it drifted 6.8 deg in 30 simulated frames,
+    # so it is opt-in) or "none".
+    scan_match: Literal["none", "laser", "all"] = "laser"
     scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
     scan_match_max_points: int = Field(200, ge=10, le=1_000_000)  # hits used (evenly thinned)
     scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)

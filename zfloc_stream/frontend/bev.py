@@ -211,7 +211,7 @@ class RollingBEV:
         hits = (beams[valid] * r[valid, None] + T[:3, 3])[:, :2]
         flat = beams[:, :2] / np.maximum(np.linalg.norm(beams[:, :2], axis=1, keepdims=True), 1e-12)
         odom = plane_pose(T, np.eye(3), "x")
-        if self.settings.bev.scan_match:
+        if self.settings.bev.scan_match != "none":
             self._match(hits, odom)
         # the odometry plane as corrected by scan matching (identity without it)
         hits, flat = self._correct_points(hits), self._correct_points(flat, rotate_only=True)
@@ -353,7 +353,7 @@ class RollingBEV:
         wall &= above
         sensor = plane_pose(T, R_plane, "z")
         xy = pts[:, :2]
-        if self.settings.bev.scan_match:
+        if self.settings.bev.scan_match == "all":
             self._match(xy[wall], sensor)
         xy, sensor = self._correct_points(xy), self._corrected(*sensor)
         centre = np.array(sensor[:2])
