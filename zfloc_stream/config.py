@@ -365,10 +365,10 @@ class LocalizerSettings(Section):
     # hits of the last local_frames frames alone, continuing from the last accepted local
     # fit; poses use it while it fits those hits at least as well.
     local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
-    local_max_step: float = Field(0.1, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
+    local_max_step: float = Field(0.2, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
-    local_every_k_frames: int = Field(1, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
-    local_outlier_distance: float = Field(0.3, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
+    local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
+    local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
     # Where a round runs (localizer.py). inline: inside the push of the frame that starts
     # it, applied at once (the reference: every published number and recorded session).
     # pipelined: on one worker beside the stream, applied exactly join_delay frames later
