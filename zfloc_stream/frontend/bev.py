@@ -256,8 +256,7 @@ class RollingBEV:
         c1, r1 = np.clip(hi, 0, g.n)
         if c1 - c0 < 3 or r1 - r0 < 3:
             return
-        wall = g.wall[r0:r1, c0:c1]
-        mask = (wall >= b.wall_min_observations) & (wall >= b.wall_min_ratio * g.hits[r0:r1, c0:c1]) & (g.logodds[r0:r1, c0:c1] > b.occupied_threshold)
+        mask = wall_cells(g.wall[r0:r1, c0:c1], g.hits[r0:r1, c0:c1], g.logodds[r0:r1, c0:c1], b)
         origin = np.array([(g.ix0 + c0) * g.res, (g.iy0 + r0) * g.res])
         step = match_scan(mask, origin, g.res, hits, centre, b)
         if step is None:
@@ -425,6 +424,12 @@ class RollingBEV:
         _increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
 
 
+def wall_cells(wall: np.ndarray, hits: np.ndarray, logodds: np.ndarray, b) -> np.ndarray:
+    """Cells that are BEV walls: wall evidence often enough, mostly seen as wall rather
+    than as clutter, and occupied (the observation and the scan matcher read the same)."""
+    return (wall >= b.wall_min_observations) & (wall >= b.wall_min_ratio * hits) & (logodds > b.occupied_threshold)
+
+
 class BevSnapshot:
     """The grid of a RollingBEV at one frame and how to turn it into a BevObservation.
     Pure: the same snapshot and rng give the same observation on any thread or process."""
@@ -438,11 +443,7 @@ class BevSnapshot:
     def observation(self, rng: np.random.Generator) -> BevObservation:
         b = self.settings.bev
         n = self.logodds.shape[0]
-        wall = (
-            (self.wall >= b.wall_min_observations)
-            & (self.wall >= b.wall_min_ratio * self.hits)  # mostly seen as wall, not as clutter
-            & (self.logodds > b.occupied_threshold)
-        )
+        wall = wall_cells(self.wall, self.hits, self.logodds, b)
         known = (self.logodds != 0) | (self.wall > 0)
         if b.memory_frames:  # cells no recent frame touched are unknown again
             recent = self.seen > self.stamp - b.memory_frames
