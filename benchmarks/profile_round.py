@@ -9,6 +9,7 @@ scoring + refinement + tracking.
 
     python benchmarks/profile_round.py                      # all cases, stage table
     python benchmarks/profile_round.py --cases camera-prior --profile 25
+    python benchmarks/profile_round.py --set estimator.scoring.backend=torch
     python benchmarks/profile_round.py --dump out.json      # per-frame status + pose, to
     python benchmarks/profile_round.py --compare a.json b.json   # compare two code versions
 """
@@ -61,19 +62,20 @@ def load_reference(checkout: Path, alias: str = "zfloc_ref") -> str:
     return alias
 
 
-def build_case(name: str, prefix: str = "zfloc_stream"):
-    """(floorplan, frames, settings) of one case; built outside any timing."""
+def build_case(name: str, prefix: str = "zfloc_stream", overrides: tuple[str, ...] = ()):
+    """(floorplan, frames, settings) of one case (dotted.key=value overrides on top of the
+    case's own); built outside any timing."""
     config, carmen, floorplan_mod, _, session = package(prefix)
     load_settings, carmen_sequence, Floorplan, read_session = (
         config.load_settings, carmen.carmen_sequence, floorplan_mod.Floorplan, session.read_session)
     if name in LASER:
         log, start, length = LASER[name]
-        settings = load_settings(base_overrides={"estimator": {"scale_mode": "fixed"}})
+        settings = load_settings(base_overrides={"estimator": {"scale_mode": "fixed"}}, overrides=list(overrides))
         seq = carmen_sequence(SHARED / "carmen" / f"{log}-corrected.log.gz", settings)
         return seq.floorplan_for(start, start + length), list(seq.frames(start, start + length)), settings
     session, mode = CAMERA[name]
     folder = SHARED / "sessions" / session
-    settings = load_settings(base_overrides={"estimator": {"scale_mode": mode}})
+    settings = load_settings(base_overrides={"estimator": {"scale_mode": mode}}, overrides=list(overrides))
     frames = list(read_session(folder / "session.mcap").frames())
     return Floorplan.load(folder / "map.yaml", settings=settings), frames, settings
 
@@ -164,6 +166,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="warm passes; each round's stage times are the minimum over them (a busy machine)")
     parser.add_argument("--dump", type=Path, help="write per-frame status + pose of every case here (JSON)")
     parser.add_argument("--compare", type=Path, nargs=2, metavar=("A", "B"))
+    parser.add_argument("--set", action="append", default=[], help="dotted.key=value for every case (e.g. estimator.scoring.backend=torch)")
     parser.add_argument("--against", type=Path, metavar="CHECKOUT", help="run a reference checkout's code side by side (A/B)")
     args = parser.parse_args(argv)
     if args.compare:
@@ -186,7 +189,7 @@ def main(argv=None) -> int:
     print(f"zfloc_stream from {Path(zfloc_stream.__file__).parent}")
     dump, all_warm = {}, []
     for name in args.cases.split(","):
-        floorplan, frames, settings = build_case(name)
+        floorplan, frames, settings = build_case(name, overrides=tuple(args.set))
         cold = run(floorplan, frames, settings)
         cold_rounds = rounds(cold)
         profiler = cProfile.Profile() if args.profile else None

@@ -137,6 +137,10 @@ class ScoringSettings(Section):
     distinct_angle_deg: float = Field(10.0, ge=0, le=180)
     chunk_size: int = Field(1_000_000, ge=1000, le=1_000_000_000)  # (hypotheses x points) elements per vectorised block: bounds memory
     wall_bucket_size: float = Field(2.0, ge=0.1, le=100)  # m, Cv fetches floorplan wall points by buckets of this size (speed only)
+    # where the scores are computed: numpy, or torch (the [torch] extra; estimation/scoring_torch.py,
+    # equal to numpy within one point per hypothesis) on scoring.device (auto: CUDA when present)
+    backend: Literal["numpy", "torch"] = "numpy"
+    device: str = "auto"
 
 
 class RefineSettings(Section):

@@ -33,12 +33,34 @@ class SegmentationBackbone(Protocol):
     def predict(self, images: list[np.ndarray]) -> list[np.ndarray]: ...
 
 
-def import_torch():
-    """(torch, transformers), or a BackboneError that says exactly what to install.
-    Imported here only, on first use: the package itself never needs torch."""
+def require_torch(purpose: str):
+    """torch, or a BackboneError that says exactly what to install. Imported here only, on
+    first use: the package itself never needs torch."""
     try:
         import torch
+    except ImportError as err:
+        raise BackboneError(f"{purpose} needs the optional [torch] extra ({err}): install it with: {INSTALL_HINT}") from None
+    return torch
+
+
+def import_torch():
+    """(torch, transformers), or a BackboneError that says exactly what to install."""
+    torch = require_torch("RGB backbones")
+    try:
         import transformers
     except ImportError as err:
         raise BackboneError(f"RGB backbones need the optional [torch] extra ({err}): install it with: {INSTALL_HINT}") from None
     return torch, transformers
+
+
+def choose_device(torch, wanted: str, setting: str = "backbones.device"):
+    """'auto' -> CUDA when present, else CPU; 'cpu', 'cuda', 'cuda:N' as given."""
+    if wanted == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(wanted)
+    except (RuntimeError, ValueError):
+        raise BackboneError(f"{setting} '{wanted}' is not a device (auto, cpu, cuda, cuda:N)") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise BackboneError(f"{setting} is '{wanted}' but torch sees no CUDA GPU (use auto or cpu)")
+    return device

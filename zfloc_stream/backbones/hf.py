@@ -23,7 +23,7 @@ import numpy as np
 
 from ..config import BackboneSettings
 from ..errors import BackboneError
-from .base import import_torch
+from .base import choose_device, import_torch
 from .labels import class_codes, grouping_matrix
 
 PREPROCESSOR_FILE = "preprocessor_config.json"
@@ -47,19 +47,6 @@ def resolve_source(spec: str) -> str:
     if spec.startswith(("/", ".", "~")) or spec.count("/") > 1 or "\\" in spec:
         raise BackboneError(f"model folder not found: {spec}")
     return spec
-
-
-def choose_device(torch, wanted: str):
-    """'auto' -> CUDA when present, else CPU; 'cpu', 'cuda', 'cuda:N' as given."""
-    if wanted == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        device = torch.device(wanted)
-    except (RuntimeError, ValueError):
-        raise BackboneError(f"backbones.device '{wanted}' is not a device (auto, cpu, cuda, cuda:N)") from None
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise BackboneError(f"backbones.device is '{wanted}' but torch sees no CUDA GPU (use auto or cpu)")
-    return device
 
 
 @dataclass(frozen=True)

@@ -144,6 +144,7 @@ class FloorplanScorer:
         coarse[:, [0, -1]] = 255
         self.coarse_field = np.ascontiguousarray(coarse).ravel()
         self._packed_fields: dict[int, np.ndarray] = {}
+        self._torch_kernels: dict[str, object] = {}  # scoring_kernels' TorchScorer per device
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
         # under a hypothesis' footprint are a few contiguous index ranges.
         walls = np.asarray(floorplan.sample_wall_points(), dtype=float).reshape(-1, 2)
@@ -320,6 +321,20 @@ def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
     return scorer
 
 
+def scoring_kernels(floorplan, settings: ScoringSettings):
+    """What computes the scores: the cached FloorplanScorer (backend numpy) or its tensors
+    on scoring.device (backend torch, built once per scorer and device)."""
+    scorer = floorplan_scorer(floorplan, settings)
+    if settings.backend == "numpy":
+        return scorer
+    kernels = scorer._torch_kernels.get(settings.device)
+    if kernels is None:
+        from .scoring_torch import TorchScorer  # the optional [torch] extra, imported on first use
+
+        kernels = scorer._torch_kernels[settings.device] = TorchScorer(scorer, floorplan, settings.device)
+    return kernels
+
+
 # --------------------------------------------------------------------------------------
 # BEV-side helpers
 # --------------------------------------------------------------------------------------
@@ -399,7 +414,7 @@ def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings:
     """Full C = Cc - Cv of every model on all BEV wall points."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = floorplan_scorer(floorplan, settings)
+    scorer = scoring_kernels(floorplan, settings)
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
     cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size, settings.violation_per)
     return Scores(cc - settings.violation_weight * cv, cc, cv)
@@ -464,7 +479,7 @@ def rank_coarse_to_fine(
     """Coarse Cc on sparse line points for all models, full C on the top_k distinct."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = floorplan_scorer(floorplan, settings)
+    scorer = scoring_kernels(floorplan, settings)
     points = sparse_points if len(sparse_points) else bev.wall_points
     coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
     order = descending(coarse)
