@@ -373,6 +373,9 @@ class LocalizerSettings(Section):
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
     local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
     local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
+    # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
+    # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
+    release_memory: bool = True
     # Where a round runs (localizer.py). inline: inside the push of the frame that starts
     # it, applied at once (the reference: every published number and recorded session).
     # pipelined: on one worker beside the stream, applied exactly join_delay frames later

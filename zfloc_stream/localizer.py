@@ -41,6 +41,7 @@ from .estimation.ransac import LocalizationResult, alignment_of, model_rows
 from .estimation.refine import refine_batch
 from .estimation.scoring import floorplan_scorer
 from .floorplan import Floorplan
+from .heap import release_free_heap
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
@@ -71,7 +72,15 @@ class RoundOutcome:
 
 def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     """Primitives + estimation of one round: a pure function of its inputs, so it gives the
-    same bits on the caller's thread, a worker thread or a worker process."""
+    same bits on the caller's thread, a worker thread or a worker process. Afterwards the
+    round's freed temporaries go back to the OS (localizer.release_memory)."""
+    out = _run_round(floorplan, settings, job)
+    if settings.localizer.release_memory:
+        release_free_heap()
+    return out
+
+
+def _run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     cfg = settings
     out = RoundOutcome(job.index, None, None)
     t0, c0 = time.perf_counter(), time.thread_time()

@@ -1,0 +1,52 @@
+"""heap.release_free_heap: free heap pages glibc keeps go back to the OS; rounds call it."""
+
+import ctypes
+import os
+
+import pytest
+
+from zfloc_stream import localizer as localizer_module
+from zfloc_stream.config import load_settings
+from zfloc_stream.heap import _malloc_trim, release_free_heap
+from zfloc_stream.sim import build_scene
+from zfloc_stream.sim.simulator import SimSettings, simulate
+
+
+def _rss_mib() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/statm") or _malloc_trim() is None, reason="needs Linux with glibc")
+def test_free_heap_pages_are_returned():
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    # 100 KiB blocks (below glibc's mmap threshold: on the heap); freeing every other one
+    # leaves free chunks between kept ones, inside the heap, which glibc does not give
+    # back by itself
+    blocks = []
+    for _ in range(640):
+        p = libc.malloc(100 * 1024)
+        ctypes.memset(p, 1, 100 * 1024)
+        blocks.append(p)
+    for p in blocks[::2]:
+        libc.free(p)
+    kept = _rss_mib()
+    assert release_free_heap()
+    returned = kept - _rss_mib()
+    for p in blocks[1::2]:
+        libc.free(p)
+    assert returned > 20, f"only {returned:.1f} MiB of the 31 MiB freed went back"
+
+
+@pytest.mark.parametrize("release", [True, False])
+def test_every_round_releases_the_heap_unless_told_not_to(monkeypatch, release):
+    calls = []
+    monkeypatch.setattr(localizer_module, "release_free_heap", lambda: calls.append(1) or True)
+    scene = build_scene("rooms", seed=0)
+    settings = load_settings(overrides=[f"localizer.release_memory={str(release).lower()}"])
+    loc = localizer_module.Localizer(scene.floorplan, settings)
+    rounds = sum("primitives" in loc.push(f).timings for f in simulate(scene, SimSettings(), seed=0, n_frames=12))
+    assert rounds >= 2
+    assert len(calls) == (rounds if release else 0)
