@@ -382,11 +382,19 @@ class HypothesisTracker:
         the heaviest mode."""
         if not self.modes:
             return None
-        confirmed = [m for m in self.modes if m.hits >= self.settings.confirm_rounds]
+        s = self.settings
+        confirmed = [m for m in self.modes if m.hits >= s.confirm_rounds]
         heaviest = max(confirmed or self.modes, key=lambda m: (tie_key(m.weight), -m.id))
         tracked = self._mode_by_id(self._tracked_id)
-        if tracked is not None and heaviest is not tracked and heaviest.hits < self.settings.lost_rounds:
-            return tracked
+        if tracked is not None:
+            return tracked if heaviest is not tracked and heaviest.hits < s.lost_rounds else heaviest
+        # Nothing tracked (initializing, lost): the confirmed modes are the ones that kept
+        # failing to dominate; a new mode that explains the data clearly better (running
+        # score ahead by lost_score_gap, the same margin that makes a tracked mode
+        # collapse) is the better guess to report while it earns confirmation.
+        newcomer = max(self.modes, key=lambda m: (tie_key(m.weight), -m.id))
+        if newcomer.running_score - heaviest.running_score > s.lost_score_gap:
+            return newcomer
         return heaviest
 
     def alternatives(self) -> list[Mode]:
