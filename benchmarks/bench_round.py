@@ -33,6 +33,21 @@ Push latency, 640x480, 60 frames (`--quick --skip-stages --latency-frames 60 --r
     10 Hz  geometric   pipelined process   10.8    27     38
     30 Hz  labels      pipelined thread    12.2   155    164   (rounds longer than 5 frames: joins wait)
 
+Again on a quiet machine (load average 0.9, same command at 10 Hz, after the torch backend
+and heap trimming; the push path is otherwise unchanged):
+
+    10 Hz  labels      inline               5.8   186    283
+    10 Hz  labels      pipelined thread     7.4    13     14
+    10 Hz  labels      pipelined process    6.6    17     18
+    10 Hz  geometric   inline               9.4   151    160
+    10 Hz  geometric   pipelined thread    11.0    26     26
+    10 Hz  geometric   pipelined process    9.8    17     17
+
+There the slowest pipelined pushes are the start / join frames: fusion (~6 ms) plus the
+tracker update and local refinement of the join (~4 ms, `tracking`) plus the BEV copy of the
+start (~1 ms). Joining one frame before the next start (`--set localizer.join_delay=4`) did
+not change the p99 (13.2 ms thread, labels).
+
 At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
 pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
 or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
