@@ -143,7 +143,6 @@ class FloorplanScorer:
         coarse[[0, -1], :] = 255
         coarse[:, [0, -1]] = 255
         self.coarse_field = np.ascontiguousarray(coarse).ravel()
-        self._packed_fields: dict[int, np.ndarray] = {}
         self._torch_kernels: dict[str, object] = {}  # scoring_kernels' TorchScorer per device
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
         # under a hypothesis' footprint are a few contiguous index ranges.
@@ -157,14 +156,6 @@ class FloorplanScorer:
         self.wall_points = walls[order]
         counts = np.bincount(key, minlength=self.bucket_shape[0] * self.bucket_shape[1])
         self.bucket_start = np.concatenate([[0], np.cumsum(counts)])  # points of bucket b: [start[b], start[b + 1])
-
-    def _packed(self, shift: int) -> np.ndarray:
-        """The coarse grid as q + 2^shift * (q < 255) (int32 while it fits), cached."""
-        if shift not in self._packed_fields:
-            dtype = np.int32 if shift <= 22 else np.int64
-            q = self.coarse_field.astype(dtype)
-            self._packed_fields[shift] = q + np.where(self.coarse_field < 255, 1 << shift, 0).astype(dtype)
-        return self._packed_fields[shift]
 
     def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
         """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
@@ -182,8 +173,6 @@ class FloorplanScorer:
         px = np.asarray(points[:, 0], dtype=np.float32)
         py = np.asarray(points[:, 1], dtype=np.float32)
         inv = 1.0 / self.resolution
-        shift = max(16, int(255 * n).bit_length())  # the low part (sum of q <= 255 n) fits below bit `shift`
-        packed = self._packed(shift)
         # chunks of at most chunk_size elements, and at most _CACHE_CHUNK so the scratch
         # buffers stay in cache (each model's value does not depend on the chunking)
         chunk_size = min(chunk_size, _CACHE_CHUNK)
@@ -195,6 +184,7 @@ class FloorplanScorer:
         #   row = clip(b * px + a * py + cv, 0, h - 1) -> int32
         f1, f2 = np.empty(size, np.float32), np.empty(size, np.float32)
         icol, irow = np.empty(size, np.int32), np.empty(size, np.int32)
+        gathered = np.empty(size, np.uint8)
         for sl in _chunks(len(models), n, chunk_size):
             m = models[sl]
             k = len(m) * n
@@ -220,11 +210,13 @@ class FloorplanScorer:
             np.copyto(row, b1, casting="unsafe")
             row *= w
             row += col
-            # one gather: q + 2^shift * (q < 255) per point, so one integer sum gives both
-            # the number of near points (high part) and the sum of q (low part)
-            total = packed.take(row).sum(axis=1, dtype=np.int64)
-            near = total >> shift
-            spread = (total & ((1 << shift) - 1)) / (255.0 * n)
+            # one gather from the uint8 grid (a quarter of the memory an int32 copy would
+            # take, so more of it stays in cache on a large map): the number of near points
+            # and the sum of q, both exact integers
+            q = gathered[:k].reshape(shape)
+            np.take(self.coarse_field, row, out=q)
+            near = n - np.count_nonzero(q == 255, axis=1)
+            spread = q.sum(axis=1, dtype=np.int64) / (255.0 * n)
             out[sl] = (near - spread / (1.0 + 1.0 / n)) / n
         return out
 

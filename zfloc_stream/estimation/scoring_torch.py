@@ -36,7 +36,7 @@ class TorchScorer:
         self.shape = scorer.shape
         self.origin = scorer.origin
         self.resolution = scorer.resolution
-        self._packed: dict[int, object] = {}
+        self._coarse = torch.as_tensor(scorer.coarse_field, device=self.device)  # uint8
         self._field = torch.as_tensor(np.asarray(floorplan._flat_field, dtype=np.float64), device=self.device)
         self._field_shape = floorplan.shape
         self._field_origin = np.asarray(floorplan.origin, dtype=float)
@@ -62,10 +62,7 @@ class TorchScorer:
             return out
         h, w = self.shape
         n = len(points)
-        shift = max(16, int(255 * n).bit_length())
-        if shift not in self._packed:
-            self._packed[shift] = self._tensor(self.scorer._packed(shift), torch.int64)
-        packed = self._packed[shift]
+        field = self._coarse
         px = self._tensor(np.asarray(points[:, 0], dtype=np.float32), torch.float32)
         py = self._tensor(np.asarray(points[:, 1], dtype=np.float32), torch.float32)
         inv = 1.0 / self.resolution
@@ -77,15 +74,16 @@ class TorchScorer:
         terms = self._tensor(np.stack([a, b, cu, cv], axis=1), torch.float32)
         # chunks bound the device memory; on CPU, cache-sized ones as the numpy path uses
         chunk_size = chunk_size if self.device.type == "cuda" else min(chunk_size, _CACHE_CHUNK)
-        totals = []
+        sums, nears = [], []
         for sl in _chunks(len(models), n, chunk_size):
             a, b, cu, cv = (terms[sl, i, None] for i in range(4))
             col = torch.clamp(a * px - b * py + cu, 0, w - 1).to(torch.int64)
             row = torch.clamp(b * px + a * py + cv, 0, h - 1).to(torch.int64)
-            totals.append(_gather(packed, row * w + col).sum(dim=1))
-        total = torch.cat(totals).cpu().numpy()
-        near = total >> shift
-        spread = (total & ((1 << shift) - 1)) / (255.0 * n)
+            q = _gather(field, row * w + col)
+            sums.append(q.sum(dim=1, dtype=torch.int64))
+            nears.append((q != 255).sum(dim=1))
+        near = torch.cat(nears).cpu().numpy()
+        spread = torch.cat(sums).cpu().numpy() / (255.0 * n)
         out[:] = (near - spread / (1.0 + 1.0 / n)) / n
         return out
 
