@@ -44,8 +44,22 @@ def test_float32_counts_round_to_the_exact_counts_everywhere():
         exact = C._exact_scores(spectrum, ij, n_i, n_j)
         fast = C._fast_peaks(spectrum, ij, side, n_i, n_j, 10)
         assert fast is not None
-        best, counts, boundary, tied = fast
+        best, counts, boundary, tied, _ = fast
         assert np.array_equal(exact[best], counts)
         assert (exact > boundary).sum() == (counts > boundary).sum()  # nothing above the boundary missed
         if not tied:
             assert len(best) == 10 and (exact >= boundary).sum() == 10
+
+
+@pytest.mark.parametrize("H, W", [(64, 48), (63, 50)])
+def test_a_templates_180_degree_turn_has_the_mirrored_transform(H, W):
+    rng = np.random.default_rng(5)
+    side = 20
+    ij = rng.integers(0, side, size=(60, 2))
+    turned = (side - 1) - ij
+    direct = C._template_spectrum(turned, side, H, W)
+    mirrored = C._mirrored_spectrum(C._template_spectrum(ij, side, H, W), C._mirror_phase(side, H, W))
+    assert mirrored.shape == direct.shape
+    assert np.abs(mirrored - direct).max() < 1e-3 * len(ij)
+    # and it is not trivially so: the unturned template's transform is far from it
+    assert np.abs(C._template_spectrum(ij, side, H, W) - direct).max() > 1.0

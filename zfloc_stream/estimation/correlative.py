@@ -133,26 +133,54 @@ def _exact_peaks(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int, per_an
     return best, score[best]
 
 
-def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: int, per_angle: int):
+def _fast_grid(spectrum: _Spectrum, side: int, n_i: int, n_j: int):
+    """(H, W, mask transform) of the fast pass: the compact grid unless placements would alias."""
+    H, W = spectrum.compact_shape
+    if n_i > H or n_j > W or side > min(H, W):  # placements would alias: the full grid
+        return (*spectrum.fft_shape, spectrum.values32)
+    return H, W, spectrum.compact
+
+
+def _template_spectrum(ij: np.ndarray, side: int, H: int, W: int) -> np.ndarray:
+    """conj(FFT) of the template on the H x W grid (complex64)."""
+    template = np.zeros((side, side), dtype=np.float32)
+    np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
+    # the template is zero outside its side x side corner: transform only those rows
+    # (columns zero-padded by rfft), then the column transform
+    spec = sfft.fft(sfft.rfft(template, n=W, axis=1), n=H, axis=0)
+    return np.conj(spec, out=spec)
+
+
+def _mirror_phase(side: int, H: int, W: int) -> np.ndarray:
+    """The phase that turns a template's conjugate transform into its 180-degree turn's
+    (_mirrored_spectrum), on the rfft half-grid (H, W // 2 + 1), complex64."""
+    k0 = np.arange(H) / H
+    k1 = np.arange(W // 2 + 1) / W
+    return np.exp(2j * np.pi * (side - 1) * (k0[:, None] + k1[None, :])).astype(np.complex64)
+
+
+def _mirrored_spectrum(conj_spec: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """conj(FFT) of the template turned by 180 degrees (cell (r, c) -> (side-1-r, side-1-c))
+    from the template's own: reflecting a real signal conjugates its transform, and the
+    shift by side - 1 is a phase, so the forward transforms of half the angles are free."""
+    return phase * np.conj(conj_spec)
+
+
+def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: int, per_angle: int, conj_spec=None):
     """One angle's `per_angle` best placements from a float32 correlation: (flat indices,
     counts, boundary count, tied). The set is the reference's exactly unless `tied` (more
     placements share the boundary count than places are left): then the reference's
     np.argpartition decides which of them it keeps, and only the ones above the boundary
-    (returned) are certain. None when the float32 pass cannot vouch for its counts."""
+    (returned) are certain. None when the float32 pass cannot vouch for its counts.
+    conj_spec: the template's conjugate transform on this pass's grid when known
+    (_mirrored_spectrum); it only changes float rounding, which the counts' check covers."""
     if n_i * n_j <= per_angle or n_i < per_angle:
         return None
-    H, W = spectrum.compact_shape
-    values = spectrum.compact
-    if n_i > H or n_j > W or side > min(H, W):  # placements would alias: the full grid
-        (H, W), values = spectrum.fft_shape, spectrum.values32
-    template = np.zeros((side, side), dtype=np.float32)
-    np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
-    # the template is zero outside its side x side corner: transform only those rows
-    # (columns zero-padded by rfft), then the column transform; the inverse likewise keeps
-    # only the n_i rows of valid placements before its row transform
-    spec = sfft.fft(sfft.rfft(template, n=W, axis=1), n=H, axis=0)
-    np.conj(spec, out=spec)
-    spec *= values
+    H, W, values = _fast_grid(spectrum, side, n_i, n_j)
+    if conj_spec is None:
+        conj_spec = _template_spectrum(ij, side, H, W)
+    spec = conj_spec * values
+    # the inverse keeps only the n_i rows of valid placements before its row transform
     score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
     # the per_angle-th largest count is at least the per_angle-th largest row maximum
     row_max = score.max(axis=1)
@@ -169,7 +197,7 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     at = counts == boundary
     tied = int(above.sum() + at.sum()) > per_angle
     keep = above if tied else (above | at)
-    return cand[keep], counts[keep], float(boundary), tied
+    return cand[keep], counts[keep], float(boundary), tied, conj_spec
 
 
 def correlative_models(
@@ -189,8 +217,10 @@ def correlative_models(
     correlative_models_reference) come from a float32 FFT instead; where an angle's
     boundary count is shared by more placements than it keeps, which of them it keeps is
     np.argpartition's choice, so that angle is recomputed the reference way whenever its
-    boundary count could matter (>= the count of the last distinct peak chosen). The
-    result is the reference's, bit for bit."""
+    boundary count could matter (>= the count of the last distinct peak chosen). Where the
+    angle grid holds each angle's 180-degree turn, the turn's template transform comes from
+    the angle's own (_mirrored_spectrum: one forward FFT per pair). The result is the
+    reference's, bit for bit."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))
@@ -203,16 +233,29 @@ def correlative_models(
     n_i, n_j = shape[0] - side + 1, shape[1] - side + 1  # placements with the template inside the mask
     per_angle = max(1, peaks)
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
-    found, templates, open_ties = [], [], {}
-    for a, theta in enumerate(thetas_grid):
-        ij = _angle_template(local, theta, cell, half)
-        templates.append(ij)
-        fast = _fast_peaks(spectrum, ij, side, n_i, n_j, per_angle)
+    n_angles = len(thetas_grid)
+    found, templates, open_ties = [None] * n_angles, [None] * n_angles, {}
+    # angle a + half_turn is angle a turned by 180 degrees: visited right after a, its
+    # template is a's reflected (checked cell by cell, floor rounding can differ) and its
+    # transform then follows from a's (_mirrored_spectrum)
+    half_turn = n_angles // 2 if n_angles % 2 == 0 and np.isclose(thetas_grid[n_angles // 2], np.pi) else 0
+    order = [a + h for a in range(half_turn) for h in (0, half_turn)] + list(range(2 * half_turn, n_angles))
+    phase = _mirror_phase(side, *_fast_grid(spectrum, side, n_i, n_j)[:2]) if half_turn else None
+    partner_spec = None
+    for a in order:
+        ij = templates[a] = _angle_template(local, thetas_grid[a], cell, half)
+        conj_spec = None
+        if half_turn and a >= half_turn and partner_spec is not None and np.array_equal(ij, (side - 1) - templates[a - half_turn]):
+            conj_spec = _mirrored_spectrum(partner_spec, phase)
+        partner_spec = None
+        fast = _fast_peaks(spectrum, ij, side, n_i, n_j, per_angle, conj_spec)
         if fast is None:
-            found.append(_exact_peaks(spectrum, ij, n_i, n_j, per_angle))
+            found[a] = _exact_peaks(spectrum, ij, n_i, n_j, per_angle)
             continue
-        best, counts, boundary, tied = fast
-        found.append((best, counts))
+        best, counts, boundary, tied, spec = fast
+        found[a] = (best, counts)
+        if half_turn and a < half_turn:
+            partner_spec = spec
         if tied:
             open_ties[a] = boundary
     while True:
