@@ -21,7 +21,17 @@ Measured on the shared 2-core machine (no GPU; load average ~2 from other jobs):
     torch-cpu  500     1.6   103.4   100.7
     torch-cpu 5000    16.7   606.6  1151.1
 
-On CPU the torch path is slower (the numpy kernels are cache-tuned and Cv only reads the
+A second run (load average 0.7, after the uint8 coarse pass), where torch's two intra-op
+threads had both cores:
+
+    numpy       50     0.2     3.8     1.7
+    numpy      500     0.6    72.9    11.5
+    numpy     5000     7.9   488.8   124.3
+    torch-cpu   50     0.3     4.7     5.1
+    torch-cpu  500     0.9    39.4    54.8
+    torch-cpu 5000     8.1   328.5   443.3
+
+On CPU the torch path is slower overall (the numpy kernels are cache-tuned and Cv only reads the
 floorplan wall points near each hypothesis, where torch reads all of them masked, a
 layout for a GPU): keep numpy there. No GPU was available to measure the CUDA column.
 """
