@@ -154,8 +154,18 @@ class FloorplanScorer:
         key = cells[:, 1] * self.bucket_shape[1] + cells[:, 0]
         order = np.argsort(key, kind="stable")
         self.wall_points = walls[order]
+        self.wall_cells = cells[order]  # (P, 2) bucket (column, row) of each wall point
         counts = np.bincount(key, minlength=self.bucket_shape[0] * self.bucket_shape[1])
         self.bucket_start = np.concatenate([[0], np.cumsum(counts)])  # points of bucket b: [start[b], start[b + 1])
+
+    def coarse_terms(self, models: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(a, b, cu, cv) float32 per model: s cos, s sin and the translation with the grid's
+        origin and resolution folded in, so a point's cell is (a x - b y + cu, b x + a y + cv)."""
+        inv = 1.0 / self.resolution
+        return ((models[:, 3] * np.cos(models[:, 2]) * inv).astype(np.float32),
+                (models[:, 3] * np.sin(models[:, 2]) * inv).astype(np.float32),
+                ((models[:, 0] - self.origin[0]) * inv).astype(np.float32),
+                ((models[:, 1] - self.origin[1]) * inv).astype(np.float32))
 
     def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
         """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
@@ -172,7 +182,6 @@ class FloorplanScorer:
         n = len(points)
         px = np.asarray(points[:, 0], dtype=np.float32)
         py = np.asarray(points[:, 1], dtype=np.float32)
-        inv = 1.0 / self.resolution
         # chunks of at most chunk_size elements, and at most _CACHE_CHUNK so the scratch
         # buffers stay in cache (each model's value does not depend on the chunking)
         chunk_size = min(chunk_size, _CACHE_CHUNK)
@@ -191,11 +200,7 @@ class FloorplanScorer:
             shape = (len(m), n)
             b1, b2 = f1[:k].reshape(shape), f2[:k].reshape(shape)
             col, row = icol[:k].reshape(shape), irow[:k].reshape(shape)
-            # fold the grid's origin and resolution into the model: u, v in cell units
-            a = (m[:, 3] * np.cos(m[:, 2]) * inv).astype(np.float32)[:, None]
-            b = (m[:, 3] * np.sin(m[:, 2]) * inv).astype(np.float32)[:, None]
-            cu = ((m[:, 0] - self.origin[0]) * inv).astype(np.float32)[:, None]
-            cv = ((m[:, 1] - self.origin[1]) * inv).astype(np.float32)[:, None]
+            a, b, cu, cv = (t[:, None] for t in self.coarse_terms(m))
             np.multiply(a, px, out=b1)
             np.multiply(b, py, out=b2)
             np.subtract(b1, b2, out=b1)
@@ -232,6 +237,25 @@ class FloorplanScorer:
             out[sl] = (f < tau_c).mean(axis=1)
         return out
 
+    def bucket_ranges(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Per axis-aligned box (lo, hi: (H, 2)) the bucket columns c0..c1 and rows r0..r1
+        it overlaps (clipped to the grid), and whether it lies wholly below / left of it."""
+        nr, nc = self.bucket_shape
+        origin, size = self.bucket_origin, self.bucket
+        c0 = np.clip(np.floor((lo[:, 0] - origin[0]) / size), 0, nc - 1).astype(np.int64)
+        c1 = np.clip(np.floor((hi[:, 0] - origin[0]) / size), 0, nc - 1).astype(np.int64)
+        r0 = np.clip(np.floor((lo[:, 1] - origin[1]) / size), 0, nr - 1).astype(np.int64)
+        r1 = np.clip(np.floor((hi[:, 1] - origin[1]) / size), 0, nr - 1).astype(np.int64)
+        empty = (hi[:, 0] < origin[0]) | (hi[:, 1] < origin[1])
+        return c0, c1, r0, r1, empty
+
+    @staticmethod
+    def footprint_boxes(models: np.ndarray, bev: "BevView") -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the square around each model's image of the BEV's free-space disc."""
+        centres = transform_points(models, bev.centre[None])[:, 0]
+        reach = models[:, 3] * bev.radius
+        return centres - reach[:, None], centres + reach[:, None]
+
     def points_in_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Floorplan wall points in the buckets overlapping each axis-aligned box
         (lo, hi: (H, 2)): (owner box (P,), point index (P,)). A superset of the points
@@ -239,11 +263,7 @@ class FloorplanScorer:
         nr, nc = self.bucket_shape
         if nr == 0 or len(lo) == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        c0 = np.clip(np.floor((lo[:, 0] - self.bucket_origin[0]) / self.bucket), 0, nc - 1).astype(np.int64)
-        c1 = np.clip(np.floor((hi[:, 0] - self.bucket_origin[0]) / self.bucket), 0, nc - 1).astype(np.int64)
-        r0 = np.clip(np.floor((lo[:, 1] - self.bucket_origin[1]) / self.bucket), 0, nr - 1).astype(np.int64)
-        r1 = np.clip(np.floor((hi[:, 1] - self.bucket_origin[1]) / self.bucket), 0, nr - 1).astype(np.int64)
-        empty = (hi[:, 0] < self.bucket_origin[0]) | (hi[:, 1] < self.bucket_origin[1])
+        c0, c1, r0, r1, empty = self.bucket_ranges(lo, hi)
         n_rows = np.where(empty, 0, r1 - r0 + 1)
         # one contiguous index range per (box, bucket row)
         box = np.repeat(np.arange(len(lo)), n_rows)
@@ -264,14 +284,13 @@ class FloorplanScorer:
         out = np.zeros(len(models))
         if len(self.wall_points) == 0 or len(models) == 0 or bev.radius <= 0:
             return out
-        centres = transform_points(models, bev.centre[None])[:, 0]
-        reach = models[:, 3] * bev.radius
+        box_lo, box_hi = self.footprint_boxes(models, bev)
         step = max(1, chunk_size // max(len(self.wall_points), 1))
         h, w = bev.state.shape
         flat_state = bev.state.ravel()
         for lo in range(0, len(models), step):
             sl = slice(lo, min(lo + step, len(models)))
-            owner, index = self.points_in_boxes(centres[sl] - reach[sl, None], centres[sl] + reach[sl, None])
+            owner, index = self.points_in_boxes(box_lo[sl], box_hi[sl])
             if len(owner) == 0:
                 continue
             q = self.wall_points[index]

@@ -42,12 +42,8 @@ class TorchScorer:
         self._field_origin = np.asarray(floorplan.origin, dtype=float)
         self._field_resolution = float(floorplan.resolution)
         self._walls = torch.as_tensor(scorer.wall_points, dtype=torch.float64, device=self.device)
-        if len(scorer.wall_points):
-            cells = np.floor((scorer.wall_points - scorer.bucket_origin) / scorer.bucket).astype(np.int64)
-        else:
-            cells = np.zeros((0, 2), np.int64)
-        self._wall_col = torch.as_tensor(cells[:, 0], device=self.device)
-        self._wall_row = torch.as_tensor(cells[:, 1], device=self.device)
+        self._wall_col = torch.as_tensor(scorer.wall_cells[:, 0], device=self.device)
+        self._wall_row = torch.as_tensor(scorer.wall_cells[:, 1], device=self.device)
 
     def _tensor(self, array, dtype):
         return self.torch.as_tensor(np.ascontiguousarray(array), dtype=dtype, device=self.device)
@@ -65,13 +61,8 @@ class TorchScorer:
         field = self._coarse
         px = self._tensor(np.asarray(points[:, 0], dtype=np.float32), torch.float32)
         py = self._tensor(np.asarray(points[:, 1], dtype=np.float32), torch.float32)
-        inv = 1.0 / self.resolution
         # the model terms in numpy float64 -> float32, exactly as the numpy kernel makes them
-        a = (models[:, 3] * np.cos(models[:, 2]) * inv).astype(np.float32)
-        b = (models[:, 3] * np.sin(models[:, 2]) * inv).astype(np.float32)
-        cu = ((models[:, 0] - self.origin[0]) * inv).astype(np.float32)
-        cv = ((models[:, 1] - self.origin[1]) * inv).astype(np.float32)
-        terms = self._tensor(np.stack([a, b, cu, cv], axis=1), torch.float32)
+        terms = self._tensor(np.stack(self.scorer.coarse_terms(models), axis=1), torch.float32)
         # chunks bound the device memory; on CPU, cache-sized ones as the numpy path uses
         chunk_size = chunk_size if self.device.type == "cuda" else min(chunk_size, _CACHE_CHUNK)
         sums, nears = [], []
@@ -129,16 +120,8 @@ class TorchScorer:
         nr, nc = scorer.bucket_shape
         if len(scorer.wall_points) == 0 or len(models) == 0 or bev.radius <= 0 or nr == 0:
             return out
-        centres = transform_points(models, bev.centre[None])[:, 0]
-        reach = models[:, 3] * bev.radius
-        lo, hi = centres - reach[:, None], centres + reach[:, None]
-        origin, size = scorer.bucket_origin, scorer.bucket
-        # the bucket ranges of FloorplanScorer.points_in_boxes, per model
-        c0 = np.clip(np.floor((lo[:, 0] - origin[0]) / size), 0, nc - 1).astype(np.int64)
-        c1 = np.clip(np.floor((hi[:, 0] - origin[0]) / size), 0, nc - 1).astype(np.int64)
-        r0 = np.clip(np.floor((lo[:, 1] - origin[1]) / size), 0, nr - 1).astype(np.int64)
-        r1 = np.clip(np.floor((hi[:, 1] - origin[1]) / size), 0, nr - 1).astype(np.int64)
-        empty = (hi[:, 0] < origin[0]) | (hi[:, 1] < origin[1])
+        # the buckets FloorplanScorer.points_in_boxes gathers, per model
+        c0, c1, r0, r1, empty = scorer.bucket_ranges(*scorer.footprint_boxes(models, bev))
         c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
         k = 1.0 / (models[:, 3] * bev.resolution)
         per_model = self._tensor(np.column_stack([models[:, 0], models[:, 1], c, sn, k]), torch.float64)
