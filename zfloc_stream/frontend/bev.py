@@ -38,6 +38,7 @@ from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
 from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..rng import make_rng
+from ..sim2 import Sim2
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
 from .scan_match import match_scan
@@ -132,7 +133,7 @@ class RollingBEV:
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
-        self._correction = (0.0, np.zeros(2))
+        self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
     # ------------------------------------------------------------------------------
     # public API
@@ -172,7 +173,7 @@ class RollingBEV:
         disagree); gravity and the trajectory stay."""
         self.grid = _ScrollingGrid(self.grid.n, self.grid.res)
         self.last_wall_hits = np.zeros((0, 2))
-        self._correction = (0.0, np.zeros(2))
+        self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
     @property
     def pending_frames(self) -> int:
@@ -226,19 +227,17 @@ class RollingBEV:
 
     def _corrected(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
         """An odometry-plane pose in the plane frame the BEV is fused in (scan matching)."""
-        theta, t = self._correction
-        if theta == 0.0 and not t.any():
+        corr = self._correction
+        if corr == Sim2():
             return x, y, yaw
-        c, s = np.cos(theta), np.sin(theta)
-        return float(c * x - s * y + t[0]), float(s * x + c * y + t[1]), float(yaw + theta)
+        px, py = corr.apply(np.array([x, y]))
+        return float(px), float(py), float(yaw + corr.theta)
 
     def _correct_points(self, xy: np.ndarray, rotate_only: bool = False) -> np.ndarray:
-        theta, t = self._correction
-        if theta == 0.0 and not t.any():
+        corr = self._correction
+        if corr == Sim2():
             return xy
-        c, s = np.cos(theta), np.sin(theta)
-        out = xy @ np.array([[c, s], [-s, c]])
-        return out if rotate_only else out + t
+        return Sim2(1.0, corr.theta).apply(xy) if rotate_only else corr.apply(xy)
 
     def _match(self, hits_odom: np.ndarray, odom_pose) -> None:
         """Scan matching: update the correction so this frame's wall hits (uncorrected
@@ -246,7 +245,6 @@ class RollingBEV:
         g, b = self.grid, self.settings.bev
         if g.ix0 is None or len(hits_odom) == 0:
             return
-        theta, t = self._correction
         hits = self._correct_points(hits_odom)
         centre = np.array(self._corrected(*odom_pose)[:2])
         margin = 2 * b.scan_match_max_shift
@@ -262,10 +260,9 @@ class RollingBEV:
         if step is None:
             return
         dtheta, dt = step
-        # x' = R_d (x - c) + c + dt composed with the correction x -> R x + t
-        c, s = np.cos(dtheta), np.sin(dtheta)
-        Rd = np.array([[c, -s], [s, c]])
-        self._correction = (theta + dtheta, Rd @ (t - centre) + centre + dt)
+        # the step x' = R_d (x - c) + c + dt about the sensor c, after the correction so far
+        turn = Sim2(1.0, dtheta)
+        self._correction = Sim2(1.0, dtheta, centre + dt - turn.apply(centre)) @ self._correction
 
     # ------------------------------------------------------------------------------
     # cameras
