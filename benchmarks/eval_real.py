@@ -18,7 +18,12 @@ spread evenly along the log (they may overlap on short logs). Each window:
   same held-out map; its reference searches the localizer's final BEV wall points (and
   places each frame by its plane pose as the BEV fused it);
 - success (F3Loc): all of the last 10 frames within 1 m. A failure is attributed to "no
-  pose" (a last-10 frame without pose), "lost" (final status lost) or "wrong mode".
+  pose" (a last-10 frame without pose), "lost" (final status lost) or "wrong mode";
+- map coverage: the fraction of the window's laser hits, placed by their TRUE poses, that
+  lie within COVERAGE_DISTANCE of a wall of the held-out map. A window whose map covers
+  little of what it sees cannot be localized by any method (on belgioioso and orebro most
+  windows cover < 0.5: those areas were walked only once); the last table splits the
+  success rates by it (camera windows walk the same trajectory: the same coverage).
 
     python benchmarks/eval_real.py                         # 5 logs x 5 lengths x 8 windows
     python benchmarks/eval_real.py --logs intel --lengths 20,50 --windows 3 --workers 2
@@ -51,6 +56,8 @@ from zfloc_stream.metrics import is_success, position_errors
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
 LOGS = ["intel", "aces", "belgioioso", "fhw", "orebro"]
 LENGTHS = [15, 20, 35, 50, 100]
+COVERAGE_DISTANCE = 0.3  # metres: estimator.correlative.tolerance, "near a wall"
+COVERAGE_BINS = [(0.0, 0.4), (0.4, 0.7), (0.7, 1.01)]
 
 
 def window_starts(n_scans: int, length: int, count: int) -> list[int]:
@@ -59,12 +66,7 @@ def window_starts(n_scans: int, length: int, count: int) -> list[int]:
 
 def laser_points(frame) -> np.ndarray:
     """Wall hits of a LaserFrame in the odometry plane."""
-    ok = frame.valid
-    a = frame.angles[ok]
-    r = frame.ranges[ok]
-    local = np.column_stack([r * np.cos(a), r * np.sin(a)])
-    T = frame.T_odom_sensor
-    return local @ T[:2, :2].T + T[:2, 3]
+    return _hits(frame, frame.T_odom_sensor)
 
 
 CAMERA = SimSettings(camera_height=1.3, camera_height_jitter=0.0, max_pitch_deg=8.0, max_roll_deg=0.0, scale_error=0.0,
@@ -114,6 +116,19 @@ def reference_row(floorplan, points, frames, yaw_of) -> dict:
     return {"ref_seconds": time.perf_counter() - t0, "ref_success": is_success(errors, 1.0), "ref_final_error": float(errors[-1])}
 
 
+def _hits(frame, T: np.ndarray) -> np.ndarray:
+    """Wall hits of a LaserFrame placed by the 4x4 sensor pose T."""
+    ok = frame.valid
+    a, r = frame.angles[ok], frame.ranges[ok]
+    return np.column_stack([r * np.cos(a), r * np.sin(a)]) @ T[:2, :2].T + T[:2, 3]
+
+
+def map_coverage(floorplan, laser_frames) -> float:
+    """Fraction of the frames' hits, placed by their true poses, near a held-out map wall."""
+    points = np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in laser_frames])
+    return float((floorplan.distance(points) < COVERAGE_DISTANCE).mean()) if len(points) else 0.0
+
+
 def _plane_T(pose) -> np.ndarray:
     """4x4 of a plane pose (x, y, yaw): the heading is the x axis."""
     x, y, yaw = pose
@@ -142,7 +157,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         truth = seq.ground_truth[start:stop]
         frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames
         result, localizer = localize_frames(floorplan, frames, settings)
-        row.update(result)
+        row.update(result, coverage=map_coverage(floorplan, seq.frames(start, stop)))
         if reference:
             obs = localizer.last_observation
             # the BEV's frame: each frame's plane pose as the localizer fused it
@@ -157,6 +172,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
     seq = carmen_sequence(path, settings)
     floorplan = seq.floorplan_for(start, stop)
     frames = list(seq.frames(start, stop))
+    row["coverage"] = map_coverage(floorplan, frames)
     if localize:
         result, _ = localize_frames(floorplan, frames, settings)
         row.update(result)
@@ -196,6 +212,12 @@ def sensor_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
         cells = [_pct([r["success"] for r in mine if r["length"] == L]) for L in lengths]
         causes = [sum(r["cause"] == c for r in mine) for c in ("no pose", "lost", "wrong mode")]
         lines.append(f"| {log} | {' | '.join(cells)} | {len(mine)} | {causes[0]} / {causes[1]} / {causes[2]} |")
+    lines += ["", "| map coverage | windows | zfloc-stream |" + (" exact search (batch) |" if reference else ""),
+              "|---|---|---|" + ("---|" if reference else "")]
+    for lo, hi in COVERAGE_BINS:
+        mine = [r for r in rows if lo <= r["coverage"] < hi]
+        cells = [_pct([r["success"] for r in mine])] + ([_pct([r["ref_success"] for r in mine])] if reference else [])
+        lines.append(f"| {lo:.1f}-{min(hi, 1.0):.1f} | {len(mine)} | {' | '.join(cells)} |")
     return "\n".join(lines)
 
 
