@@ -63,3 +63,45 @@ def test_a_templates_180_degree_turn_has_the_mirrored_transform(H, W):
     assert np.abs(mirrored - direct).max() < 1e-3 * len(ij)
     # and it is not trivially so: the unturned template's transform is far from it
     assert np.abs(C._template_spectrum(ij, side, H, W) - direct).max() > 1.0
+
+
+def _segments(angles_deg, length=3.0, spacing=2.0):
+    """Parallel segments, one per angle, side by side (a LineSet)."""
+    from zfloc_stream.geometry import LineSet
+    ends = []
+    for k, a in enumerate(np.deg2rad(angles_deg)):
+        d = np.array([np.cos(a), np.sin(a)])
+        base = np.array([0.0, k * spacing])
+        ends.append([base, base + length * d])
+    return LineSet.from_endpoints(np.array(ends))
+
+
+def test_plausible_angles_keep_the_rotations_that_put_walls_on_walls():
+    floorplan = _segments([0, 90, 0, 90, 0])
+    bev = _segments([10, 100, 10])  # the BEV's walls are the floorplan's turned by -10 (or 80, 170, 260)
+    kept = C.plausible_angles(bev, floorplan, 4.0, 0.3)
+    grid = np.arange(0.0, 360.0, 4.0)
+    assert kept.shape == grid.shape
+    for truth in (350.0, 80.0, 170.0, 260.0):
+        nearest = np.argmin(np.abs((grid - truth + 180) % 360 - 180))
+        assert kept[nearest]
+    assert not kept[np.argmin(np.abs(grid - 35.0))]  # 45 degrees off every wall direction
+    assert kept.sum() < 0.3 * len(grid)
+    assert np.array_equal(kept[:45], kept[45:])  # a 180-degree turn agrees just as well
+    assert C.plausible_angles(bev, floorplan, 4.0, 0.0) is None
+    assert C.plausible_angles(_segments([]), floorplan, 4.0, 0.3) is None
+
+
+def test_a_masked_search_returns_only_searched_angles_and_all_angles_is_the_reference():
+    scene = build_scene("office", seed=0)
+    points = _points(scene, 10, 0)
+    kw = dict(cell=0.25, angle_step_deg=4.0, tolerance=0.3, peaks=10)
+    grid = np.deg2rad(np.arange(0.0, 360.0, 4.0))
+    everything = C.correlative_models(scene.floorplan, points, angles=np.ones(len(grid), dtype=bool), **kw)
+    assert np.array_equal(everything, C.correlative_models_reference(scene.floorplan, points, **kw))
+    mask = np.zeros(len(grid), dtype=bool)
+    mask[[0, 1, 22, 23, 45, 46, 67, 68]] = True  # 0, 4, 88, 92 degrees and their turns
+    models = C.correlative_models(scene.floorplan, points, angles=mask, **kw)
+    assert len(models) > 0
+    on_grid = np.argmin(np.abs((models[:, 2][:, None] - grid[None, :] + np.pi) % (2 * np.pi) - np.pi), axis=1)
+    assert mask[on_grid].all()

@@ -22,6 +22,7 @@ import scipy.fft as sfft
 
 from ..config import RefineSettings
 from ..errors import InputError
+from ..geometry import LineSet
 from ..sim2 import Sim2, wrap_angle
 from .refine import refine_batch
 
@@ -106,6 +107,39 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
 # for) that the fast pass accepts; beyond it, the angle is recomputed in float64. Seen on
 # the real buildings: ~1e-4.
 _ROUNDING_SLACK = 0.25
+
+
+def _direction_histogram(lines: LineSet) -> np.ndarray:
+    """Length-weighted histogram of the lines' directions modulo 180 degrees, 1-degree bins."""
+    ends = np.asarray(lines.endpoints, dtype=float).reshape(-1, 2, 2)
+    d = ends[:, 1] - ends[:, 0]
+    degrees = np.rad2deg(np.arctan2(d[:, 1], d[:, 0])) % 180.0
+    return np.bincount(np.floor(degrees).astype(np.int64) % 180, weights=np.hypot(d[:, 0], d[:, 1]), minlength=180)
+
+
+def plausible_angles(bev_lines: LineSet, floorplan_lines: LineSet, angle_step_deg: float, ratio: float) -> np.ndarray | None:
+    """Which rotations of the angle grid (np.arange(0, 360, angle_step_deg)) can turn the
+    BEV's walls onto the floorplan's: a rotation turns every direction by the same angle,
+    so the length-weighted agreement of the two direction histograms under a rotation
+    (a circular correlation, modulo 180 degrees) is high at the true one. Kept: the grid
+    angles within one step of a rotation whose agreement is at least `ratio` of the
+    best's (a 180-degree turn agrees exactly as well, so both of a pair are kept). None
+    (search every angle) when ratio is 0 or either side has no lines."""
+    if ratio <= 0 or len(bev_lines.endpoints) == 0 or len(floorplan_lines.endpoints) == 0:
+        return None
+    bev, fp = _direction_histogram(bev_lines), _direction_histogram(floorplan_lines)
+    # agreement[delta] = sum_b bev[b] * fp[b + delta]: BEV direction b lands on b + delta
+    agreement = np.real(np.fft.ifft(np.conj(np.fft.fft(bev)) * np.fft.fft(fp)))
+    if not agreement.max() > 0:
+        return None
+    wanted = agreement >= ratio * agreement.max()
+    grid = np.arange(0.0, 360.0, angle_step_deg)
+    # grid angle theta is kept when a wanted integer rotation lies within one step of it
+    # (half a step for the truth between two grid angles, the 1-degree bins, line noise)
+    offsets = np.arange(-np.ceil(angle_step_deg) - 1, np.ceil(angle_step_deg) + 2)
+    near = np.floor(grid[:, None] + offsets[None, :]).astype(np.int64)
+    close = np.abs(near - grid[:, None]) <= angle_step_deg + 1.0
+    return (wanted[near % 180] & close).any(axis=1)
 
 
 def _angle_template(local: np.ndarray, theta: float, cell: float, half: int) -> np.ndarray:
@@ -209,9 +243,13 @@ def correlative_models(
     angle_step_deg: float = 2.0,
     tolerance: float = 0.15,
     peaks: int = 8,
+    angles: np.ndarray | None = None,
 ) -> np.ndarray:
     """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
     distinct (1 m at the points' centre, or 10 deg).
+
+    angles: a boolean mask over the angle grid (plausible_angles); the others are not
+    searched (None: all).
 
     Each angle's per_angle best placements (np.argpartition of the float64 counts, as
     correlative_models_reference) come from a float32 FFT instead; where an angle's
@@ -219,8 +257,8 @@ def correlative_models(
     np.argpartition's choice, so that angle is recomputed the reference way whenever its
     boundary count could matter (>= the count of the last distinct peak chosen). Where the
     angle grid holds each angle's 180-degree turn, the turn's template transform comes from
-    the angle's own (_mirrored_spectrum: one forward FFT per pair). The result is the
-    reference's, bit for bit."""
+    the angle's own (_mirrored_spectrum: one forward FFT per pair). With every angle
+    searched the result is the reference's, bit for bit."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))
@@ -234,18 +272,22 @@ def correlative_models(
     per_angle = max(1, peaks)
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
     n_angles = len(thetas_grid)
-    found, templates, open_ties = [None] * n_angles, [None] * n_angles, {}
+    searched = np.ones(n_angles, dtype=bool) if angles is None else np.asarray(angles, dtype=bool).reshape(n_angles)
+    nothing = (np.zeros(0, dtype=np.int64), np.zeros(0))
+    found, templates, open_ties = [nothing] * n_angles, [None] * n_angles, {}
     # angle a + half_turn is angle a turned by 180 degrees: visited right after a, its
     # template is a's reflected (checked cell by cell, floor rounding can differ) and its
     # transform then follows from a's (_mirrored_spectrum)
     half_turn = n_angles // 2 if n_angles % 2 == 0 and np.isclose(thetas_grid[n_angles // 2], np.pi) else 0
     order = [a + h for a in range(half_turn) for h in (0, half_turn)] + list(range(2 * half_turn, n_angles))
+    order = [a for a in order if searched[a]]
     phase = _mirror_phase(side, *_fast_grid(spectrum, side, n_i, n_j)[:2]) if half_turn else None
     partner_spec = None
     for a in order:
         ij = templates[a] = _angle_template(local, thetas_grid[a], cell, half)
         conj_spec = None
-        if half_turn and a >= half_turn and partner_spec is not None and np.array_equal(ij, (side - 1) - templates[a - half_turn]):
+        partner = templates[a - half_turn] if half_turn and a >= half_turn else None
+        if partner_spec is not None and partner is not None and np.array_equal(ij, (side - 1) - partner):
             conj_spec = _mirrored_spectrum(partner_spec, phase)
         partner_spec = None
         fast = _fast_peaks(spectrum, ij, side, n_i, n_j, per_angle, conj_spec)

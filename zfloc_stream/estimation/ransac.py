@@ -51,7 +51,7 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from ..sim2 import Sim2, wrap_angle
-from .correlative import correlative_models
+from .correlative import correlative_models, plausible_angles
 from ..ties import descending, tie_keys
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, implied_poses, rank_coarse_to_fine, score_hypotheses, sparse_line_points
@@ -480,8 +480,10 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     wall-face field so they enter the ranking as sharp as the refined RANSAC models."""
     c = cfg.correlative
     scale = 1.0 if cfg.scale_mode == "fixed" else scale_prior
+    angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
     models = correlative_models(
-        floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance, peaks=c.peaks
+        floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
+        peaks=c.peaks, angles=angles,
     )
     if len(models) == 0:
         return np.zeros((0, 4))
