@@ -29,6 +29,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
     python benchmarks/eval_real.py --logs intel --lengths 20,50 --windows 3 --workers 2
     python benchmarks/eval_real.py --no-reference --set tracking.weight_gain=10
     python benchmarks/eval_real.py --camera --windows 3           # camera rows too
+    python benchmarks/eval_real.py --drift-free --logs belgioioso,orebro   # what the maps allow
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors
+from zfloc_stream.sim2 import Sim2
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
 LOGS = ["intel", "aces", "belgioioso", "fhw", "orebro"]
@@ -127,6 +129,24 @@ def map_coverage(floorplan, laser_frames) -> float:
     """Fraction of the frames' hits, placed by their true poses, near a held-out map wall."""
     points = np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in laser_frames])
     return float((floorplan.distance(points) < COVERAGE_DISTANCE).mean()) if len(points) else 0.0
+
+
+def drift_free_row(log: str, start: int, length: int) -> dict:
+    """The exact search with perfect relative motion: every hit of the window placed by its
+    TRUE pose, then moved by a fixed rigid offset (so the grid is not aligned with the
+    truth) and searched like the reference. What no odometry drift, i.e. the held-out
+    map alone, allows."""
+    settings = load_settings(base_overrides={"estimator": {"scale_mode": "fixed"}})
+    seq = carmen_sequence(DATA / f"{log}-corrected.log.gz", settings)
+    floorplan = seq.floorplan_for(start, start + length)
+    frames = list(seq.frames(start, start + length))
+    offset = Sim2(1.0, 1.234, np.array([13.0, -7.0]))
+    points = offset.apply(np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in frames]))
+    found = correlative_search(floorplan, points)[0].alignment @ offset  # the identity when right
+    truth = np.array([f.ground_truth[:2] for f in frames])
+    errors = np.linalg.norm(found.apply(truth) - truth, axis=1)
+    return {"log": log, "start": start, "length": length, "success": is_success(errors, 1.0),
+            "coverage": map_coverage(floorplan, frames)}
 
 
 def _plane_T(pose) -> np.ndarray:
@@ -252,6 +272,8 @@ def main(argv=None) -> int:
     parser.add_argument("--reference-cache", type=Path,
                         help="laser reference rows read from / added to this JSON file (the reference does not depend on the localizer)")
     parser.add_argument("--reference-only", action="store_true", help="only fill --reference-cache, then stop")
+    parser.add_argument("--drift-free", action="store_true",
+                        help="only the exact search on the laser windows placed by their true poses (what the held-out maps allow), then stop")
     args = parser.parse_args(argv)
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
@@ -265,6 +287,17 @@ def main(argv=None) -> int:
                 for camera in [False] * (not args.no_laser) + [True] * args.camera:
                     jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
+    if args.drift_free:
+        rows = _map(drift_free_row, list(dict.fromkeys(j[:3] for j in jobs)), args.workers)
+        print("| drift-free exact search | " + " | ".join(f"#{L}" for L in lengths) + " | all |\n" + "|---" * (len(lengths) + 2) + "|")
+        for log in logs:
+            mine = [r for r in rows if r["log"] == log]
+            cells = [_pct([r["success"] for r in mine if r["length"] == L]) for L in lengths]
+            print(f"| {log} | {' | '.join(cells)} | {_pct([r['success'] for r in mine])} |")
+        print(f"| all | {' | '.join(_pct([r['success'] for r in rows if r['length'] == L]) for L in lengths)} | {_pct([r['success'] for r in rows])} |")
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
+        return 0
     cache = _read_cache(args.reference_cache)
     missing = [j for j in jobs if j[5] and not j[6] and _cache_key(j) not in cache] if args.reference_cache else []
     rows = _map(run_window, [(*j, False) for j in missing], args.workers)

@@ -110,11 +110,18 @@ _ROUNDING_SLACK = 0.25
 
 
 def _direction_histogram(lines: LineSet) -> np.ndarray:
-    """Length-weighted histogram of the lines' directions modulo 180 degrees, 1-degree bins."""
+    """Length-weighted histogram of the lines' directions modulo 180 degrees, 1-degree bins,
+    each line shared linearly between its two nearest bins: a wall at 90 degrees must not
+    jump between bins 89 and 90 with the last bit of arctan2 (SIMD kernels differ by CPU)."""
     ends = np.asarray(lines.endpoints, dtype=float).reshape(-1, 2, 2)
     d = ends[:, 1] - ends[:, 0]
     degrees = np.rad2deg(np.arctan2(d[:, 1], d[:, 0])) % 180.0
-    return np.bincount(np.floor(degrees).astype(np.int64) % 180, weights=np.hypot(d[:, 0], d[:, 1]), minlength=180)
+    length = np.hypot(d[:, 0], d[:, 1])
+    low = np.floor(degrees)
+    upper = degrees - low
+    low = low.astype(np.int64) % 180
+    return (np.bincount(low, weights=length * (1.0 - upper), minlength=180)
+            + np.bincount((low + 1) % 180, weights=length * upper, minlength=180))
 
 
 def plausible_angles(bev_lines: LineSet, floorplan_lines: LineSet, angle_step_deg: float, ratio: float) -> np.ndarray | None:
@@ -151,7 +158,7 @@ def _angle_template(local: np.ndarray, theta: float, cell: float, half: int) -> 
 
 def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np.ndarray:
     """The grid counts of every placement, rounded (float64, flat), computed as the
-    reference always has: the float64 array whose np.argpartition picks an angle's peaks."""
+    reference always has: the float64 array an angle's peaks are picked from."""
     template = np.zeros(spectrum.fft_shape, dtype=np.float32)
     np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
     # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
@@ -160,11 +167,22 @@ def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np
 
 
 def _exact_peaks(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int, per_angle: int) -> tuple[np.ndarray, np.ndarray]:
-    """(flat placement indices, counts) of one angle's peaks, exactly as the reference
-    search picks them (np.argpartition on the full float64 array, ties included)."""
+    """(flat placement indices, counts) of one angle's per_angle best placements, ties at
+    the boundary count broken by the lower flat index (np.argpartition's own choice among
+    ties depends on the CPU's SIMD sort kernels: a symmetric corridor ties by the dozen)."""
     score = _exact_scores(spectrum, ij, n_i, n_j)
-    best = np.argpartition(score, -per_angle)[-per_angle:] if len(score) > per_angle else np.arange(len(score))
+    if len(score) <= per_angle:
+        return np.arange(len(score)), score
+    best = _lowest_index_best(np.arange(len(score)), score, np.partition(score, -per_angle)[-per_angle], per_angle)
     return best, score[best]
+
+
+def _lowest_index_best(index: np.ndarray, counts: np.ndarray, boundary: float, per_angle: int) -> np.ndarray:
+    """Positions (into index / counts, index ascending) of the per_angle best: every count
+    above the boundary, then the boundary's lowest indices."""
+    above = np.flatnonzero(counts > boundary)
+    at = np.flatnonzero(counts == boundary)[: per_angle - len(above)]
+    return np.sort(np.concatenate([above, at]))
 
 
 def _fast_grid(spectrum: _Spectrum, side: int, n_i: int, n_j: int):
@@ -202,12 +220,10 @@ def _mirrored_spectrum(conj_spec: np.ndarray, phase: np.ndarray) -> np.ndarray:
 
 def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: int, per_angle: int, conj_spec=None):
     """One angle's `per_angle` best placements from a float32 correlation: (flat indices,
-    counts, boundary count, tied). The set is the reference's exactly unless `tied` (more
-    placements share the boundary count than places are left): then the reference's
-    np.argpartition decides which of them it keeps, and only the ones above the boundary
-    (returned) are certain. None when the float32 pass cannot vouch for its counts.
-    conj_spec: the template's conjugate transform on this pass's grid when known
-    (_mirrored_spectrum); it only changes float rounding, which the counts' check covers."""
+    counts, conj_spec), the same set as _exact_peaks. None when the float32 pass cannot
+    vouch for its counts. conj_spec: the template's conjugate transform on this pass's
+    grid when known (_mirrored_spectrum); it only changes float rounding, which the
+    counts' check covers."""
     if n_i * n_j <= per_angle or n_i < per_angle:
         return None
     H, W, values = _fast_grid(spectrum, side, n_i, n_j)
@@ -216,7 +232,8 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     spec = conj_spec * values
     # the inverse keeps only the n_i rows of valid placements before its row transform
     score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
-    # the per_angle-th largest count is at least the per_angle-th largest row maximum
+    # the per_angle-th largest count is at least the per_angle-th largest row maximum, so
+    # every placement at or above it lies in these rows: cand holds all of them, ascending
     row_max = score.max(axis=1)
     floor_count = np.round(np.partition(row_max, -per_angle)[-per_angle])
     rows = np.flatnonzero(row_max >= floor_count - 0.5)
@@ -226,12 +243,8 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     counts = np.round(raw)
     if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
         return None
-    boundary = np.partition(counts, -per_angle)[-per_angle]
-    above = counts > boundary
-    at = counts == boundary
-    tied = int(above.sum() + at.sum()) > per_angle
-    keep = above if tied else (above | at)
-    return cand[keep], counts[keep], float(boundary), tied, conj_spec
+    keep = _lowest_index_best(cand, counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
+    return cand[keep], counts[keep], conj_spec
 
 
 def correlative_models(
@@ -251,11 +264,9 @@ def correlative_models(
     angles: a boolean mask over the angle grid (plausible_angles); the others are not
     searched (None: all).
 
-    Each angle's per_angle best placements (np.argpartition of the float64 counts, as
-    correlative_models_reference) come from a float32 FFT instead; where an angle's
-    boundary count is shared by more placements than it keeps, which of them it keeps is
-    np.argpartition's choice, so that angle is recomputed the reference way whenever its
-    boundary count could matter (>= the count of the last distinct peak chosen). Where the
+    Each angle's per_angle best placements (the highest float64 counts, ties by the lower
+    placement index, as correlative_models_reference) come from a float32 FFT instead,
+    whose counts are checked to round to the same integers. Where the
     angle grid holds each angle's 180-degree turn, the turn's template transform comes from
     the angle's own (_mirrored_spectrum: one forward FFT per pair). With every angle
     searched the result is the reference's, bit for bit."""
@@ -274,7 +285,7 @@ def correlative_models(
     n_angles = len(thetas_grid)
     searched = np.ones(n_angles, dtype=bool) if angles is None else np.asarray(angles, dtype=bool).reshape(n_angles)
     nothing = (np.zeros(0, dtype=np.int64), np.zeros(0))
-    found, templates, open_ties = [nothing] * n_angles, [None] * n_angles, {}
+    found, templates = [nothing] * n_angles, [None] * n_angles
     # angle a + half_turn is angle a turned by 180 degrees: visited right after a, its
     # template is a's reflected (checked cell by cell, floor rounding can differ) and its
     # transform then follows from a's (_mirrored_spectrum)
@@ -294,23 +305,11 @@ def correlative_models(
         if fast is None:
             found[a] = _exact_peaks(spectrum, ij, n_i, n_j, per_angle)
             continue
-        best, counts, boundary, tied, spec = fast
+        best, counts, spec = fast
         found[a] = (best, counts)
         if half_turn and a < half_turn:
             partner_spec = spec
-        if tied:
-            open_ties[a] = boundary
-    while True:
-        chosen, last = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
-        # the last chosen count: candidates below it were never reached
-        reach = last if len(chosen[0]) >= peaks else -np.inf
-        pending = [a for a, boundary in open_ties.items() if boundary >= reach]
-        if not pending:
-            break
-        for a in pending:
-            found[a] = _exact_peaks(spectrum, templates[a], n_i, n_j, per_angle)
-            del open_ties[a]
-    t, thetas = chosen
+    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
     return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
 
 
@@ -351,7 +350,7 @@ def correlative_models_reference(
     tolerance: float = 0.15,
     peaks: int = 8,
 ) -> np.ndarray:
-    """correlative_models the plain way (one float64 FFT and np.argpartition per angle):
+    """correlative_models the plain way (one float64 FFT per angle, every placement counted):
     what the fast version must reproduce exactly (tests, benchmarks)."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
