@@ -106,3 +106,12 @@ def test_a_masked_search_returns_only_searched_angles_and_all_angles_is_the_refe
     assert len(models) > 0
     on_grid = np.argmin(np.abs((models[:, 2][:, None] - grid[None, :] + np.pi) % (2 * np.pi) - np.pi), axis=1)
     assert mask[on_grid].all()
+
+
+def test_direction_histogram_is_continuous_across_bin_edges():
+    """A wall at 90 degrees must not jump a bin with the last bit of arctan2 (SIMD kernels
+    differ by CPU), or the searched rotations would differ from machine to machine."""
+    below = C._direction_histogram(_segments([90.0 - 1e-9]))
+    above = C._direction_histogram(_segments([90.0 + 1e-9]))
+    assert np.abs(below - above).max() < 1e-6
+    assert np.isclose(below.sum(), 3.0)  # the length, shared between neighbouring bins
