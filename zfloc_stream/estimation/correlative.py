@@ -168,20 +168,26 @@ def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np
 
 def _exact_peaks(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int, per_angle: int) -> tuple[np.ndarray, np.ndarray]:
     """(flat placement indices, counts) of one angle's per_angle best placements, ties at
-    the boundary count broken by the lower flat index (np.argpartition's own choice among
-    ties depends on the CPU's SIMD sort kernels: a symmetric corridor ties by the dozen)."""
+    the boundary count picked evenly spread in flat-index order (_spread_best; not
+    np.argpartition's own choice among ties, which depends on the CPU's SIMD sort
+    kernels: a symmetric corridor ties by the dozen)."""
     score = _exact_scores(spectrum, ij, n_i, n_j)
     if len(score) <= per_angle:
         return np.arange(len(score)), score
-    best = _lowest_index_best(np.arange(len(score)), score, np.partition(score, -per_angle)[-per_angle], per_angle)
+    best = _spread_best(np.arange(len(score)), score, np.partition(score, -per_angle)[-per_angle], per_angle)
     return best, score[best]
 
 
-def _lowest_index_best(index: np.ndarray, counts: np.ndarray, boundary: float, per_angle: int) -> np.ndarray:
+def _spread_best(index: np.ndarray, counts: np.ndarray, boundary: float, per_angle: int) -> np.ndarray:
     """Positions (into index / counts, index ascending) of the per_angle best: every count
-    above the boundary, then the boundary's lowest indices."""
+    above the boundary, then placements at the boundary count spread evenly over them in
+    index order (deterministic, and not all from one corner of the map: the lowest
+    indices would be neighbours, of which the non-maximum suppression keeps one)."""
     above = np.flatnonzero(counts > boundary)
-    at = np.flatnonzero(counts == boundary)[: per_angle - len(above)]
+    at = np.flatnonzero(counts == boundary)
+    wanted = per_angle - len(above)
+    if len(at) > wanted:
+        at = at[np.round(np.linspace(0, len(at) - 1, wanted)).astype(np.int64)]
     return np.sort(np.concatenate([above, at]))
 
 
@@ -243,7 +249,7 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     counts = np.round(raw)
     if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
         return None
-    keep = _lowest_index_best(cand, counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
+    keep = _spread_best(cand, counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
     return cand[keep], counts[keep], conj_spec
 
 
@@ -264,8 +270,8 @@ def correlative_models(
     angles: a boolean mask over the angle grid (plausible_angles); the others are not
     searched (None: all).
 
-    Each angle's per_angle best placements (the highest float64 counts, ties by the lower
-    placement index, as correlative_models_reference) come from a float32 FFT instead,
+    Each angle's per_angle best placements (the highest float64 counts, ties spread evenly
+    in placement order, as correlative_models_reference) come from a float32 FFT instead,
     whose counts are checked to round to the same integers. Where the
     angle grid holds each angle's 180-degree turn, the turn's template transform comes from
     the angle's own (_mirrored_spectrum: one forward FFT per pair). With every angle
