@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import scipy.fft as sfft
@@ -209,12 +210,16 @@ def _template_spectrum(ij: np.ndarray, side: int, H: int, W: int) -> np.ndarray:
     return np.conj(spec, out=spec)
 
 
+@lru_cache(maxsize=8)
 def _mirror_phase(side: int, H: int, W: int) -> np.ndarray:
     """The phase that turns a template's conjugate transform into its 180-degree turn's
-    (_mirrored_spectrum), on the rfft half-grid (H, W // 2 + 1), complex64."""
+    (_mirrored_spectrum), on the rfft half-grid (H, W // 2 + 1), complex64. Cached: once
+    the rolling BEV is full its template side repeats round after round (read-only)."""
     k0 = np.arange(H) / H
     k1 = np.arange(W // 2 + 1) / W
-    return np.exp(2j * np.pi * (side - 1) * (k0[:, None] + k1[None, :])).astype(np.complex64)
+    phase = np.exp(2j * np.pi * (side - 1) * (k0[:, None] + k1[None, :])).astype(np.complex64)
+    phase.flags.writeable = False
+    return phase
 
 
 def _mirrored_spectrum(conj_spec: np.ndarray, phase: np.ndarray) -> np.ndarray:
