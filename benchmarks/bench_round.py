@@ -43,6 +43,15 @@ and heap trimming; the push path is otherwise unchanged):
     10 Hz  geometric   pipelined thread    11.0    26     26
     10 Hz  geometric   pipelined process    9.8    17     17
 
+After the correlative rotation prefilter and the 3L scale pre-check (rounds ~30% shorter),
+load average 0.4-0.6, the same command 4 times (p99 of each run, ms):
+
+    labels      pipelined thread    14.7   7.2   9.2  11.0
+    labels      pipelined process   11.8   7.2  10.0  11.8
+    geometric   pipelined thread    11.4   9.5  14.6  14.3
+    geometric   pipelined process   12.2  14.6  13.9  15.4
+    (inline: p99 73-100 ms, the round)
+
 There the slowest pipelined pushes are the start / join frames: fusion (~6 ms) plus the
 tracker update and local refinement of the join (~4 ms, `tracking`) plus the BEV copy of the
 start (~1 ms). Joining one frame before the next start (`--set localizer.join_delay=4`) did
