@@ -125,10 +125,22 @@ def _hits(frame, T: np.ndarray) -> np.ndarray:
     return np.column_stack([r * np.cos(a), r * np.sin(a)]) @ T[:2, :2].T + T[:2, 3]
 
 
-def map_coverage(floorplan, laser_frames) -> float:
-    """Fraction of the frames' hits, placed by their true poses, near a held-out map wall."""
-    points = np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in laser_frames])
+def true_hits(laser_frames) -> np.ndarray:
+    """The frames' wall hits placed by their true poses (floorplan frame)."""
+    return np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in laser_frames])
+
+
+def map_coverage(floorplan, points: np.ndarray) -> float:
+    """Fraction of true_hits near a held-out map wall."""
     return float((floorplan.distance(points) < COVERAGE_DISTANCE).mean()) if len(points) else 0.0
+
+
+def laser_window(log: str, start: int, length: int, overrides=(), seed: int = 0):
+    """(settings, floorplan, frames) of a held-out laser window at fixed scale."""
+    settings = load_settings(overrides=list(overrides), base_overrides={"estimator": {"scale_mode": "fixed"}})
+    settings = settings.model_copy(update={"seed": seed})
+    seq = carmen_sequence(DATA / f"{log}-corrected.log.gz", settings)
+    return settings, seq.floorplan_for(start, start + length), list(seq.frames(start, start + length))
 
 
 def drift_free_row(log: str, start: int, length: int) -> dict:
@@ -136,17 +148,14 @@ def drift_free_row(log: str, start: int, length: int) -> dict:
     TRUE pose, then moved by a fixed rigid offset (so the grid is not aligned with the
     truth) and searched like the reference. What no odometry drift, i.e. the held-out
     map alone, allows."""
-    settings = load_settings(base_overrides={"estimator": {"scale_mode": "fixed"}})
-    seq = carmen_sequence(DATA / f"{log}-corrected.log.gz", settings)
-    floorplan = seq.floorplan_for(start, start + length)
-    frames = list(seq.frames(start, start + length))
+    _, floorplan, frames = laser_window(log, start, length)
+    placed = true_hits(frames)
     offset = Sim2(1.0, 1.234, np.array([13.0, -7.0]))
-    points = offset.apply(np.concatenate([_hits(f, _plane_T(f.ground_truth)) for f in frames]))
-    found = correlative_search(floorplan, points)[0].alignment @ offset  # the identity when right
+    found = correlative_search(floorplan, offset.apply(placed))[0].alignment @ offset  # the identity when right
     truth = np.array([f.ground_truth[:2] for f in frames])
     errors = np.linalg.norm(found.apply(truth) - truth, axis=1)
     return {"log": log, "start": start, "length": length, "success": is_success(errors, 1.0),
-            "coverage": map_coverage(floorplan, frames)}
+            "coverage": map_coverage(floorplan, placed)}
 
 
 def _plane_T(pose) -> np.ndarray:
@@ -177,7 +186,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         truth = seq.ground_truth[start:stop]
         frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames
         result, localizer = localize_frames(floorplan, frames, settings)
-        row.update(result, coverage=map_coverage(floorplan, seq.frames(start, stop)))
+        row.update(result, coverage=map_coverage(floorplan, true_hits(seq.frames(start, stop))))
         if reference:
             obs = localizer.last_observation
             # the BEV's frame: each frame's plane pose as the localizer fused it
@@ -187,12 +196,8 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
             else:
                 row.update(reference_row(floorplan, obs.wall_points, posed, lambda T: np.arctan2(T[1, 0], T[0, 0])))
         return row
-    base = {"estimator": {"scale_mode": "fixed"}}
-    settings = load_settings(overrides=overrides, base_overrides=base).model_copy(update={"seed": seed})
-    seq = carmen_sequence(path, settings)
-    floorplan = seq.floorplan_for(start, stop)
-    frames = list(seq.frames(start, stop))
-    row["coverage"] = map_coverage(floorplan, frames)
+    settings, floorplan, frames = laser_window(log, start, length, overrides, seed)
+    row["coverage"] = map_coverage(floorplan, true_hits(frames))
     if localize:
         result, _ = localize_frames(floorplan, frames, settings)
         row.update(result)

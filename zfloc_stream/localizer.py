@@ -316,23 +316,23 @@ class Localizer:
             return
         points = np.concatenate(hits)
         points = points[:: max(1, len(points) // lc.local_max_points)]
+        centre = points.mean(axis=0)
         continuing = self._local is not None and self._local[0] == best.id
         start = self._local[1] if continuing else best.alignment
         est = self.settings.estimator
+        # (a fixed-scale mode's s is 1 only up to the filter's round-off: keep it out)
         if continuing and est.scale_mode != "fixed" and start.s != best.alignment.s:
             # The local fit keeps the scale fixed (ten frames of hits barely observe it);
             # the rounds measure it on the whole BEV, so the chain takes the mode's scale,
             # about the recent hits' centre (where the local fit put them stays put).
             # Without this the chain kept its first scale forever (office seed 14: 1.015
             # against a true 1.044 for 90 frames, 0.1-0.25 m off).
-            centre = points.mean(axis=0)
-            s_new = best.alignment.s
-            start = Sim2(s_new, start.theta, start.apply(centre) - s_new * Sim2(1.0, start.theta).R @ centre)
+            s = best.alignment.s
+            start = Sim2(s, start.theta, start.apply(centre) - s * start.R @ centre)
         field = floorplan_scorer(self.floorplan, est.scoring).face_field
         refine = est.refine.model_copy(update={"outlier_distance": lc.local_outlier_distance})
         local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed")[0])
         # a step from where it started (the drift of one round), never a jump elsewhere
-        centre = points.mean(axis=0)
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
         frames = max(1, self.frames_fused - self._local_frame)
         self._local_frame = self.frames_fused

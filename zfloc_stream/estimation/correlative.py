@@ -175,15 +175,16 @@ def _exact_peaks(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int, per_an
     score = _exact_scores(spectrum, ij, n_i, n_j)
     if len(score) <= per_angle:
         return np.arange(len(score)), score
-    best = _spread_best(np.arange(len(score)), score, np.partition(score, -per_angle)[-per_angle], per_angle)
+    best = _spread_best(score, np.partition(score, -per_angle)[-per_angle], per_angle)
     return best, score[best]
 
 
-def _spread_best(index: np.ndarray, counts: np.ndarray, boundary: float, per_angle: int) -> np.ndarray:
-    """Positions (into index / counts, index ascending) of the per_angle best: every count
-    above the boundary, then placements at the boundary count spread evenly over them in
-    index order (deterministic, and not all from one corner of the map: the lowest
-    indices would be neighbours, of which the non-maximum suppression keeps one)."""
+def _spread_best(counts: np.ndarray, boundary: float, per_angle: int) -> np.ndarray:
+    """Positions (into counts, whose placements come in ascending index order) of the
+    per_angle best: every count above the boundary, then placements at the boundary count
+    spread evenly over them in index order (deterministic, and not all from one corner of
+    the map: the lowest indices would be neighbours, of which the non-maximum suppression
+    keeps one)."""
     above = np.flatnonzero(counts > boundary)
     at = np.flatnonzero(counts == boundary)
     wanted = per_angle - len(above)
@@ -254,7 +255,7 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     counts = np.round(raw)
     if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
         return None
-    keep = _spread_best(cand, counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
+    keep = _spread_best(counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
     return cand[keep], counts[keep], conj_spec
 
 

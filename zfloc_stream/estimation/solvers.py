@@ -214,12 +214,13 @@ def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings:
     ok = _normals_consistent(theta, [(bnx[b[i]], bny[b[i]], fnx[f[i]], fny[f[i]]) for i in (1, 2)], settings, c, sn, cos12)
     source = np.flatnonzero(ok)
     bd, fd = bev_lines.offsets, fp_lines.offsets
-    source = source[_scale_plausible([v[source] for v in b], [v[source] for v in f], [v[source] for v in cos12],
-                                     bd, fd, fnx, fny, settings)]
-    bs, fs = [v[source] for v in b], [v[source] for v in f]
+    bs, fs, cs = ([v[source] for v in arrays] for arrays in (b, f, cos12))
+    plausible = _scale_plausible(bs, fs, cs, bd, fd, fnx, fny, settings)
+    source = source[plausible]
+    bs, fs, cs = ([v[plausible] for v in arrays] for arrays in (bs, fs, cs))
     return _solve_3l_components(
         [(bnx[i], bny[i]) for i in bs], [bd[i] for i in bs], [(fnx[i], fny[i]) for i in fs], [fd[i] for i in fs],
-        theta[source], source, settings, c[source], sn[source], [v[source] for v in cos12],
+        theta[source], source, settings, c[source], sn[source], cs,
     )
 
 
