@@ -283,7 +283,15 @@ def main(argv=None) -> int:
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
     logs = [s for s in args.logs.split(",") if s]
-    lengths = [int(v) for v in args.lengths.split(",")]
+    missing_logs = [log for log in logs if not (DATA / f"{log}-corrected.log.gz").exists()]
+    if missing_logs:
+        parser.error(f"no Carmen log for {', '.join(missing_logs)} in {DATA} (have: {', '.join(LOGS)})")
+    try:
+        lengths = [int(v) for v in args.lengths.split(",")]
+    except ValueError:
+        parser.error(f"--lengths must be comma-separated whole numbers, got {args.lengths!r}")
+    if any(L < 1 for L in lengths):
+        parser.error(f"--lengths must be positive, got {args.lengths!r}")
     jobs = []
     for log in logs:
         n = len(load_log(DATA / f"{log}-corrected.log.gz", load_settings()))
