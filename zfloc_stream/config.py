@@ -200,6 +200,11 @@ class EstimatorSettings(Section):
     scoring: ScoringSettings = ScoringSettings()
     refine: RefineSettings = RefineSettings()
     ransac: RansacSettings = RansacSettings()
+    # Hot loops (coarse/full scoring, the 3L solver, the LM refinement) in plain numpy, or
+    # compiled with numba (the optional [fast] extra, zfloc_stream/numba_support.py): the
+    # same decisions within the cross-machine tolerance (estimation/*_numba.py say which
+    # kernels are bit for bit), several times faster.
+    kernels: Literal["numpy", "numba"] = "numpy"
 
 
 class GravitySettings(Section):

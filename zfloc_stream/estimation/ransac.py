@@ -404,7 +404,7 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     # per-column int32 indices (the same lines as picks[q], rows[row]), cheaper to gather
     b = [np.ascontiguousarray(picks[:, k], dtype=np.int32)[q] for k in range(3)]
     f = [col[row] for col in fp.triplets.columns]
-    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
+    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers, kernels=cfg.kernels)[0]
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
@@ -488,7 +488,7 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     if len(models) == 0:
         return np.zeros((0, 4))
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
+    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
 
 
 def _guided_candidates(lines: LineSet, fp_lines: LineSet, warm: Sim2, cfg) -> tuple[np.ndarray, np.ndarray]:
@@ -545,8 +545,8 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
     models = model_rows(warm)
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
-    scores = score_hypotheses(floorplan, view, models, cfg.scoring)
+    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
+    scores = score_hypotheses(floorplan, view, models, cfg.scoring, kernels=cfg.kernels)
     rows = []
     for i, m in enumerate(models):
         both = np.vstack([m[None], kept]) if len(kept) else m[None]
@@ -637,7 +637,7 @@ def localize(
         return LocalizationResult([], {"model_estimation": t1 - t0, **zero}, 0, {"model_estimation": c1 - c0, **zero})
     sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
     view = BevView.of(obs, cfg.scoring.tau_v)
-    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
+    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring, kernels=cfg.kernels)
     t2, c2 = time.perf_counter(), time.thread_time()
 
     # ---- refinement --------------------------------------------------------------------
@@ -650,8 +650,8 @@ def localize(
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
         field = floorplan_scorer(floorplan, cfg.scoring).face_field
-        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
-        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
+        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds, kernels=cfg.kernels)
+        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring, kernels=cfg.kernels)
         better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
         total[:n_refine][better] = rescored.total[better]

@@ -98,13 +98,19 @@ def refine_batch(
     settings: RefineSettings = RefineSettings(),
     scale_mode: ScaleMode = "free",
     scale_bounds: tuple[float, float] = (0.5, 2.0),
+    kernels: str = "numpy",
 ) -> np.ndarray:
     """Refine several models (H, 4) at once: each has its own damping and stopping test,
     but every LM iteration evaluates all still-active models in one vectorised pass (the
     per-call overhead, not the arithmetic, dominates a 4-parameter problem).
 
     field: anything with distance_field, origin and resolution (a Floorplan, or the
-    estimator's wall-face field, scoring.FaceField)."""
+    estimator's wall-face field, scoring.FaceField). kernels: "numba" runs the same
+    iteration compiled, one model at a time (refine_numba.py; the optional [fast] extra)."""
+    if kernels == "numba":
+        from .refine_numba import refine_batch_numba  # the optional [fast] extra, imported on first use
+
+        return refine_batch_numba(field, points, models, settings, scale_mode, scale_bounds)
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     out = models.copy()
     pts = thin_points(points, settings.max_points)

@@ -332,11 +332,17 @@ def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
     return scorer
 
 
-def scoring_kernels(floorplan, settings: ScoringSettings):
-    """What computes the scores: the cached FloorplanScorer (backend numpy) or its tensors
-    on scoring.device (backend torch, built once per scorer and device)."""
+def scoring_kernels(floorplan, settings: ScoringSettings, kernels: str = "numpy"):
+    """What computes the scores: the cached FloorplanScorer (backend numpy), the same
+    scorer's data read by compiled loops (backend numpy with estimator.kernels numba,
+    scoring_numba.NumbaScorer), or its tensors on scoring.device (backend torch, built once
+    per scorer and device)."""
     scorer = floorplan_scorer(floorplan, settings)
     if settings.backend == "numpy":
+        if kernels == "numba":
+            from .scoring_numba import NumbaScorer  # the optional [fast] extra, imported on first use
+
+            return NumbaScorer(scorer)
         return scorer
     kernels = scorer._torch_kernels.get(settings.device)
     if kernels is None:
@@ -421,11 +427,11 @@ class Scores:
     violation: np.ndarray  # Cv
 
 
-def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings: ScoringSettings = ScoringSettings()) -> Scores:
+def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings: ScoringSettings = ScoringSettings(), kernels: str = "numpy") -> Scores:
     """Full C = Cc - Cv of every model on all BEV wall points."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = scoring_kernels(floorplan, settings)
+    scorer = scoring_kernels(floorplan, settings, kernels)
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
     cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size, settings.violation_per)
     return Scores(cc - settings.violation_weight * cv, cc, cv)
@@ -486,15 +492,16 @@ def rank_coarse_to_fine(
     sparse_points: np.ndarray,
     anchor: np.ndarray,
     settings: ScoringSettings = ScoringSettings(),
+    kernels: str = "numpy",
 ) -> Ranking:
     """Coarse Cc on sparse line points for all models, full C on the top_k distinct."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = scoring_kernels(floorplan, settings)
+    scorer = scoring_kernels(floorplan, settings, kernels)
     points = sparse_points if len(sparse_points) else bev.wall_points
     coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
     order = descending(coarse)
     top = order[distinct(models[order], anchor, settings, settings.top_k)]
-    scores = score_hypotheses(floorplan, bev, models[top], settings)
+    scores = score_hypotheses(floorplan, bev, models[top], settings, kernels)
     best = descending(scores.total)
     return Ranking(top[best], Scores(scores.total[best], scores.consistency[best], scores.violation[best]), coarse)

@@ -191,7 +191,7 @@ def _normals_consistent(theta, lines, settings: SolverSettings, c=None, sn=None,
 
 
 @_quiet
-def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings: SolverSettings = SolverSettings()):
+def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings: SolverSettings = SolverSettings(), kernels: str = "numpy"):
     """solve_3l (free / prior scale) for samples given by line indices: b = (b0, b1, b2)
     into bev_lines, f = (f0, f1, f2) into fp_lines (three index arrays each, or (B, 3)
     arrays), with the normal angles of both line sets given (_angle of their normals).
