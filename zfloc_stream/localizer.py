@@ -42,6 +42,7 @@ from .estimation.refine import refine_batch
 from .estimation.scoring import floorplan_scorer
 from .floorplan import Floorplan
 from .heap import release_free_heap
+from .numba_support import check_kernels
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
@@ -151,6 +152,7 @@ class Localizer:
         settings.backbones when the first such frame arrives (a replay of a session whose
         frames carry depth never loads them)."""
         self.settings = settings or Settings()
+        check_kernels(self.settings.estimator.kernels)  # numba asked for but missing: one line now, not at the first round
         self.perception = perception
         self.floorplan = floorplan
         self.bev = RollingBEV(self.settings)

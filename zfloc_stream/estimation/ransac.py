@@ -241,9 +241,13 @@ class _AngleTable:
         return self.start[key], np.where(valid, self.counts[key], 0)
 
 
-def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator, kernels: str = "numpy") -> tuple[np.ndarray, np.ndarray]:
     """For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b)
     uniform draws (with replacement) from its n_b candidates. Returns (query, table row)."""
+    if kernels == "numba":
+        from .ransac_numba import draw  # the optional [fast] extra, imported on first use
+
+        return draw(starts, sizes, fraction, rng)
     n = sizes.sum(axis=1)
     k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
     query = np.repeat(np.arange(len(n)), k)
@@ -395,7 +399,7 @@ def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     if cfg.scale_mode == "fixed":
         b, f = picks[q], fp.triplets.rows[row]
         return solve_3l(
@@ -410,7 +414,7 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
     picks = bev.pairs[rng.choice(len(bev.pairs), size=n, p=bev.pair_p)]
     starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     b, f = picks[q], fp.pairs.rows[row]
     mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
     return solve_2l(
@@ -422,7 +426,7 @@ def _models_lc(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks = bev.line_circle[rng.choice(len(bev.line_circle), size=n, p=bev.line_circle_p)]
     starts = np.zeros((n, 1), dtype=np.int64)
     sizes = np.full((n, 1), len(fp.line_circle), dtype=np.int64)
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng)
+    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     b, f = picks[q], fp.line_circle[row]
     return solve_lc(
         bev.lines.normals[b[:, 0]],
@@ -443,7 +447,7 @@ def _models_2c(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks, dist = bev.circle_pairs[pick], bev.circle_dist[pick]
     lo = np.searchsorted(fp.circle_dist, cfg.solvers.min_scale * dist, side="left")
     hi = np.searchsorted(fp.circle_dist, cfg.solvers.max_scale * dist, side="right")
-    q, row = _draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng)
+    q, row = _draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng, cfg.kernels)
     b, f = picks[q], fp.circle_pairs[row]
     return solve_2c(
         bev.circles.centers[b], fp.circles.centers[f], cfg.solvers, cfg.scale_mode, bev.circles.radii[b], fp.circles.radii[f]
