@@ -197,12 +197,17 @@ def solve_3l_indexed(bev_lines, fp_lines, b, f, bev_angles, fp_angles, settings:
     arrays), with the normal angles of both line sets given (_angle of their normals).
     The normal test runs on gathers of single components and only its survivors are
     gathered, one contiguous array per component. The same models as solve_3l on the
-    gathered arrays, bit for bit."""
+    gathered arrays, bit for bit. kernels: "numba" runs the three stages in one compiled
+    loop per sample (solvers_numba), the same models in the same order."""
     b = [np.asarray(v) for v in (b.T if isinstance(b, np.ndarray) else b)]
     f = [np.asarray(v) for v in (f.T if isinstance(f, np.ndarray) else f)]
     if len(b[0]) == 0:
         return _empty()
     bnx, bny, fnx, fny = (np.ascontiguousarray(a) for a in (bev_lines.normals[:, 0], bev_lines.normals[:, 1], fp_lines.normals[:, 0], fp_lines.normals[:, 1]))
+    if kernels == "numba":
+        from .solvers_numba import solve_3l_indexed as compiled  # the optional [fast] extra, imported on first use
+
+        return compiled(bnx, bny, bev_lines.offsets, fnx, fny, fp_lines.offsets, b, f, bev_angles, fp_angles, settings)
     # The rotation depends on the anchor pair only: theta, cos and sin are computed once
     # per (floorplan line, BEV line) pair and gathered (element-wise functions of the same
     # theta: the same values as computing them per sample).

@@ -1,0 +1,190 @@
+"""The scores of scoring.py as compiled loops (estimator.kernels: numba; the [fast] extra).
+
+Each kernel does, per hypothesis and point, the float operations FloorplanScorer's numpy
+code does, in the same dtypes and the same order, so every point lands in the same cell
+and passes the same test; what is summed are integer counts (and the coarse grid's uint8
+levels), exact in any order. The results are therefore bit-identical to the numpy path
+(tests/test_scoring_numba.py). Trigonometry stays in numpy, outside the kernels (numpy's
+sin/cos need not round like the C library's).
+
+The loops need none of the (hypotheses x points) temporaries numpy builds, so chunk_size
+(which bounds them there) has nothing to bound here. Single-threaded; every kernel
+releases the GIL.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from ..numba_support import njit
+from .scoring import DEEP_FREE, FREE
+
+
+@njit
+def _coarse_kernel(a, b, cu, cv, px, py, grid, h, w, out):
+    """FloorplanScorer.coarse_consistency for every model: the float32 cell coordinates
+    a x - b y + cu and b x + a y + cv, clipped to the grid and truncated to int32, index
+    the uint8 coarse grid; out = (near - spread / (1 + 1/n)) / n."""
+    n = px.shape[0]
+    col_max = np.float32(w - 1)  # np.clip's bounds, float32 like the array it clips
+    row_max = np.float32(h - 1)
+    zero = np.float32(0.0)
+    for i in range(a.shape[0]):
+        ai, bi, cui, cvi = a[i], b[i], cu[i], cv[i]
+        far = 0
+        total = 0
+        for j in range(n):
+            x = ai * px[j] - bi * py[j] + cui
+            y = bi * px[j] + ai * py[j] + cvi
+            # np.clip; "not >=" also sends NaN (where numpy's take raises) to the border
+            # ring, which reads as far from any wall, instead of an arbitrary address
+            if not x >= zero:
+                x = zero
+            elif x > col_max:
+                x = col_max
+            if not y >= zero:
+                y = zero
+            elif y > row_max:
+                y = row_max
+            # truncation of a value in [0, w - 1], as numpy's cast to int32 (the index
+            # itself in int64: the same number, and no overflow on a huge grid)
+            q = grid[np.int64(y) * w + np.int64(x)]
+            total += q
+            if q == 255:
+                far += 1
+        near = n - far
+        spread = total / (255.0 * n)
+        out[i] = (near - spread / (1.0 + 1.0 / n)) / n
+
+
+@njit
+def _consistency_kernel(a, b, tx, ty, px, py, field, h, w, ox, oy, res, tau_c, out):
+    """FloorplanScorer.consistency for every model: the points mapped by x' = s R x + t
+    (a = s cos, b = s sin), f^c by Floorplan.distance's bilinear lookup, out = the share
+    below tau_c. False (out unfinished) when a mapped point is not finite, where
+    Floorplan.distance raises."""
+    n = px.shape[0]
+    for i in range(a.shape[0]):
+        ai, bi, txi, tyi = a[i], b[i], tx[i], ty[i]
+        below = 0
+        for j in range(n):
+            x = ai * px[j] - bi * py[j] + txi
+            y = bi * px[j] + ai * py[j] + tyi
+            if not (math.isfinite(x) and math.isfinite(y)):
+                return False
+            u = (x - ox) / res - 0.5
+            v = (y - oy) / res - 0.5
+            uc = min(max(u, 0.0), w - 1.0)
+            vc = min(max(v, 0.0), h - 1.0)
+            c0 = min(np.int64(uc), w - 2)
+            r0 = min(np.int64(vc), h - 2)
+            fu = uc - c0
+            fv = vc - r0
+            k = r0 * w + c0
+            top = field[k] * (1.0 - fu) + field[k + 1] * fu
+            bottom = field[k + w] * (1.0 - fu) + field[k + w + 1] * fu
+            value = top * (1.0 - fv) + bottom * fv
+            # outside the grid: plus the distance to it. Inside, numpy adds hypot(0, 0) = 0,
+            # which cannot change the comparison (value >= 0), so the call is skipped.
+            if u != uc or v != vc:
+                value = value + math.hypot(u - uc, v - vc) * res
+            if value < tau_c:
+                below += 1
+        out[i] = below / n
+    return True
+
+
+@njit
+def _violation_kernel(tx, ty, c, sn, k, c0, c1, r0, r1, empty, bucket_start, n_cols, walls, state, h, w, ou, ov, observed, out):
+    """FloorplanScorer.violation for every model: the floorplan wall points of the buckets
+    under its footprint box (rows r0..r1, columns c0..c1; one contiguous range per row)
+    pulled back into BEV cells by (R^T (x' - t)) k - origin; of those in observed free
+    space (or any observed cell, `observed`), the share in deep free space."""
+    for i in range(tx.shape[0]):
+        if empty[i]:
+            continue
+        txi, tyi, ci, si, ki = tx[i], ty[i], c[i], sn[i], k[i]
+        n_seen = 0
+        n_bad = 0
+        for r in range(r0[i], r1[i] + 1):
+            for p in range(bucket_start[r * n_cols + c0[i]], bucket_start[r * n_cols + c1[i] + 1]):
+                dx = walls[p, 0] - txi
+                dy = walls[p, 1] - tyi
+                u = (ci * dx + si * dy) * ki - ou
+                v = (-si * dx + ci * dy) * ki - ov
+                if not (u >= 0 and u < w and v >= 0 and v < h):
+                    continue  # state 0 (unseen) in the numpy path
+                # inside the grid numpy's clip changes nothing the truncation keeps
+                s = state[np.int64(v) * w + np.int64(u)]
+                if s == DEEP_FREE:
+                    n_bad += 1
+                    n_seen += 1
+                elif s == FREE or (observed and s > 0):
+                    n_seen += 1
+        if n_seen > 0:
+            out[i] = n_bad / n_seen
+
+
+class NumbaScorer:
+    """A FloorplanScorer's three scores computed by the compiled kernels above, reading the
+    scorer's own arrays (and its floorplan's distance field): nothing is copied, so
+    wrapping a scorer costs nothing."""
+
+    def __init__(self, scorer):
+        self.scorer = scorer
+
+    def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
+        """FloorplanScorer.coarse_consistency (same value, same tie-break)."""
+        scorer = self.scorer
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0 or len(models) == 0:
+            return out
+        h, w = scorer.shape
+        px = np.ascontiguousarray(points[:, 0], dtype=np.float32)
+        py = np.ascontiguousarray(points[:, 1], dtype=np.float32)
+        a, b, cu, cv = scorer.coarse_terms(models)  # numpy float64 -> float32, as the numpy path
+        _coarse_kernel(a, b, cu, cv, px, py, scorer.coarse_field, h, w, out)
+        return out
+
+    def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
+        """FloorplanScorer.consistency: Cc with the floorplan's bilinear f^c."""
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0 or len(models) == 0:
+            return out
+        floorplan = self.scorer._floorplan()
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        # transform_points' a and b (numpy's cos and sin)
+        a = models[:, 3] * np.cos(models[:, 2])
+        b = models[:, 3] * np.sin(models[:, 2])
+        h, w = floorplan.shape
+        finite = _consistency_kernel(a, b, np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1]),
+                                     np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), floorplan._flat_field,
+                                     h, w, float(floorplan.origin[0]), float(floorplan.origin[1]), float(floorplan.resolution),
+                                     float(tau_c), out)
+        if not finite:
+            raise InputError("points passed to Floorplan.distance contain NaN or inf")
+        return out
+
+    def violation(self, models: np.ndarray, bev, tau_v: float, chunk_size: int, per: str = "free") -> np.ndarray:
+        """FloorplanScorer.violation: the same buckets per model, the same points, the same
+        counts."""
+        scorer = self.scorer
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        n_rows, n_cols = scorer.bucket_shape
+        if len(scorer.wall_points) == 0 or len(models) == 0 or bev.radius <= 0 or n_rows == 0:
+            return out
+        c0, c1, r0, r1, empty = scorer.bucket_ranges(*scorer.footprint_boxes(models, bev))
+        c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
+        k = 1.0 / (models[:, 3] * bev.resolution)
+        h, w = bev.state.shape
+        _violation_kernel(np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1]), c, sn, k,
+                          c0, c1, r0, r1, empty, scorer.bucket_start, n_cols, scorer.wall_points,
+                          np.ascontiguousarray(bev.state).ravel(), h, w,
+                          float(bev.origin_cells[0]), float(bev.origin_cells[1]), per == "observed", out)
+        return out
