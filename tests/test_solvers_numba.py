@@ -138,3 +138,45 @@ def test_real_session_samples(monkeypatch):
     for bounds in (cfg, cfg.model_copy(update={"min_scale": FREE.min_scale, "max_scale": FREE.max_scale})):
         models, _ = _assert_identical(bev_lines, fp_lines, b, f, bounds)
         assert len(models) > 1000
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("fixed", [False, True], ids=["prior", "fixed"])
+def test_two_lines_random_and_degenerate(seed, fixed):
+    """solvers_numba.solve_two_lines_indexed against solvers._solve_two_lines (2L at a
+    prior, 2L / 3L at fixed scale) on the gathered samples: random and degenerate lines,
+    samples of one rigid transform, scales in and out of bounds and non-finite."""
+    from zfloc_stream.estimation.solvers import _solve_two_lines
+    from zfloc_stream.estimation.solvers_numba import solve_two_lines_indexed
+
+    rng = np.random.default_rng(seed)
+    bev = _random_lines(rng, 25)
+    theta, t = rng.uniform(-np.pi, np.pi), rng.normal(0, 4, 2)
+    rot = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    moved = bev.normals @ rot.T
+    clutter = _random_lines(rng, 150)
+    with np.errstate(over="ignore", invalid="ignore"):
+        fp = _lines(np.vstack([moved, clutter.normals]), np.concatenate([bev.offsets - moved @ t, clutter.offsets]))
+    k = 30_000
+    b = [rng.integers(0, len(bev.offsets), k) for _ in range(2)]
+    f = [np.where(rng.random(k) < 0.5, b[i], rng.integers(0, len(fp.offsets), k)) for i in range(2)]
+    settings = PRIOR
+    if fixed:
+        scales = np.ones(k)
+    else:
+        scales = rng.uniform(0.8, 1.2, k)
+        scales[rng.random(k) < 0.02] = np.nan
+        scales[rng.random(k) < 0.02] = np.inf
+    n = np.stack([bev.normals[b[0]], bev.normals[b[1]]], axis=1)
+    d = np.stack([bev.offsets[b[0]], bev.offsets[b[1]]], axis=1)
+    m = np.stack([fp.normals[f[0]], fp.normals[f[1]]], axis=1)
+    e = np.stack([fp.offsets[f[0]], fp.offsets[f[1]]], axis=1)
+    with np.errstate(all="ignore"):
+        ref = _solve_two_lines(n, d, m, e, scales, settings, skip_scale_check=fixed)
+    got = solve_two_lines_indexed(bev, fp, b, f, scales, _angle(bev.normals), _angle(fp.normals), settings, skip_scale_check=fixed)
+    assert got[0].shape == ref[0].shape and got[1].dtype == ref[1].dtype
+    assert np.array_equal(got[0].view(np.int64), ref[0].view(np.int64))
+    assert np.array_equal(got[1], ref[1])
+    assert len(ref[0]) > k // 10
+    empty = solve_two_lines_indexed(bev, fp, [b[0][:0]] * 2, [f[0][:0]] * 2, np.zeros(0), _angle(bev.normals), _angle(fp.normals), settings)
+    assert empty[0].shape == (0, 4) and empty[1].dtype == np.int64

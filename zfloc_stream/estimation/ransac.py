@@ -399,6 +399,12 @@ def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
+    if cfg.kernels == "numba" and cfg.scale_mode != "fixed":
+        from .solvers_numba import drawn_3l  # the optional [fast] extra, imported on first use
+
+        # draw and solve in one compiled loop: the same random numbers, the same models
+        return drawn_3l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.triplets.rows, bev.lines, fp.lines,
+                        _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     if cfg.scale_mode == "fixed":
         b, f = picks[q], fp.triplets.rows[row]
@@ -414,9 +420,16 @@ def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
     picks = bev.pairs[rng.choice(len(bev.pairs), size=n, p=bev.pair_p)]
     starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
+    mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
+    if cfg.kernels == "numba":
+        from .solvers_numba import drawn_2l  # the optional [fast] extra, imported on first use
+
+        # draw and solve in one compiled loop: the same random numbers (draws, then the
+        # scale noise), the same models
+        return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.pairs.rows, bev.lines, fp.lines,
+                        _line_angles(bev.lines), fp.line_angles, scale_prior, cfg.solvers, mode)[0]
     q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     b, f = picks[q], fp.pairs.rows[row]
-    mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
     return solve_2l(
         bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], scale_prior, rng, cfg.solvers, mode
     )[0]

@@ -1,6 +1,8 @@
 """Compiled loops of the hybrid RANSAC (estimator.kernels: numba; the [fast] extra).
 
-Integer index arithmetic only, so the results equal the numpy path exactly."""
+Integer index arithmetic only, so the results equal the numpy path exactly. The draw of
+one table row (_draw_row) is shared with the fused draw-and-solve kernels of
+solvers_numba, which call it from their own loops."""
 
 from __future__ import annotations
 
@@ -10,40 +12,69 @@ from ..numba_support import njit
 
 
 @njit
+def _cumulate(sizes, b, cum):
+    """cum[r] = sizes[b, 0] + ... + sizes[b, r] (the running count of query b's
+    candidates up to range r, integers: exact); returns n_b."""
+    n = 0
+    for r in range(sizes.shape[1]):
+        n += sizes[b, r]
+        cum[r] = n
+    return n
+
+
+@njit
+def _draw_row(starts, sizes, cum, b, n, uniform):
+    """The table row of one draw for query b with n > 0 candidates, cum from _cumulate:
+    uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1), as the numpy path)
+    and mapped to starts[b, r] + u - (cum[b, r] - sizes[b, r]), r the range holding u: the
+    number of cumulative counts <= u, as numpy's searchsorted(side="right") finds it
+    (counted without branches: which range a random draw lands in is unpredictable).
+
+    NB solvers_numba's fused kernels call this function and numba's disk cache does not
+    notice a change in another file: after editing it, delete solvers_numba's cached
+    kernels (__pycache__/solvers_numba.*.nbi / .nbc)."""
+    u = np.int64(uniform * n)  # truncation, as numpy's astype(int64) of a non-negative value
+    if u > n - 1:
+        u = n - 1
+    r = 0
+    for k in range(cum.shape[0]):
+        r += cum[k] <= u
+    return starts[b, r] + u - (cum[r] - sizes[b, r])
+
+
+@njit
 def _draw_rows(starts, sizes, counts, uniform):
-    """For each query b, counts[b] draws: uniform[j] in [0, 1) scaled to the query's n_b
-    candidates (u = min(floor(uniform * n_b), n_b - 1), as the numpy path) and mapped to
-    the table row starts[b, r] + u - (candidates in ranges before r), r the range
-    holding u. Returns (query, row) per draw."""
+    """For each query b, counts[b] draws, uniform[j] mapped to its table row by
+    _draw_row. Returns (query, row) per draw."""
     total = uniform.shape[0]
     query = np.empty(total, np.int64)
     row = np.empty(total, np.int64)
+    cum = np.empty(sizes.shape[1], np.int64)
     j = 0
     for b in range(starts.shape[0]):
-        n = 0
-        for r in range(sizes.shape[1]):
-            n += sizes[b, r]
+        n = _cumulate(sizes, b, cum)
         for _ in range(counts[b]):
-            u = np.int64(uniform[j] * n)  # truncation, as numpy's astype(int64) of a non-negative value
-            if u > n - 1:
-                u = n - 1
-            before = 0
-            r = 0
-            while before + sizes[b, r] <= u:  # the range whose cumulative size first exceeds u
-                before += sizes[b, r]
-                r += 1
             query[j] = b
-            row[j] = starts[b, r] + u - before
+            row[j] = _draw_row(starts, sizes, cum, b, n, uniform[j])
             j += 1
     return query, row
 
 
-def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """ransac._draw compiled: the same random numbers drawn from rng, the same (query, row)."""
+def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator):
+    """What ransac._draw takes from rng, taken the same way: the number of draws per query
+    (ceil(fraction * n_b), at least one where n_b > 0) and one uniform per draw (none, and
+    nothing taken from rng, when there are no draws). Also starts and sizes as contiguous
+    int64, as the kernels take them."""
     n = sizes.sum(axis=1)
     k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
     total = int(k.sum())
-    if total == 0:
+    uniform = rng.random(total) if total else np.zeros(0)
+    return np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(sizes, dtype=np.int64), k, uniform
+
+
+def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """ransac._draw compiled: the same random numbers drawn from rng, the same (query, row)."""
+    starts, sizes, k, uniform = draw_uniforms(starts, sizes, fraction, rng)
+    if len(uniform) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    uniform = rng.random(total)
-    return _draw_rows(np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(sizes, dtype=np.int64), k, uniform)
+    return _draw_rows(starts, sizes, k, uniform)

@@ -1,18 +1,23 @@
-"""The 3L minimal solver at free / prior scale compiled (estimator.kernels: numba; the
-[fast] extra).
+"""The line solvers compiled (estimator.kernels: numba; the [fast] extra): 3L at free /
+prior scale, and the two-line solver with known scales (2L at a prior, 3L and 2L at fixed
+scale).
 
 solvers.solve_3l_indexed runs its samples through three vectorised stages: the normal
 test, the scale plausibility test and Cramer's rule, each gathering and filtering whole
-arrays (most samples fail the first two tests). Here one loop runs all three per sample
-and writes only the models that survive, so no per-sample temporaries are built.
+arrays (most samples fail the first two tests); solvers._solve_two_lines builds (B, 2, 2)
+temporaries for both rotation candidates and merges them by sample. Here one loop runs a
+sample's whole solve (_solve_3l_one, _solve_2l_one) and writes only the models that
+survive, so no per-sample temporaries are built. The fused kernels (_drawn_3l,
+_drawn_2l) also draw the sample's floorplan tuple in that loop (ransac_numba._draw_row),
+so ransac's per-draw index arrays are never built either.
 
 Bit for bit the numpy path: every expression below is the numpy code's, in its order of
 operations (_normals_consistent, _scale_plausible, _solve_3l_components, _det3_rows,
-_scale_ok, _pack), evaluated without fastmath (no reassociation, no fused
-multiply-add). The transcendental functions stay in numpy: cos and sin of the
-(floorplan line, BEV line) rotation table are computed there exactly as the numpy path
-computes them and only gathered here, and the final angle wrap is solvers._wrap on the
-survivors.
+_scale_ok, _pack; _parallel, _rotate, _signed_fp, _cross, _solve_two_lines), evaluated
+without fastmath (no reassociation, no fused multiply-add). The transcendental functions
+stay in numpy: the anchor rotation and its cos and sin per (floorplan line, BEV line)
+pair are computed there exactly as the numpy path computes them and only gathered here,
+and the final angle wrap is solvers._wrap on the survivors.
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ import numpy as np
 
 from ..config import SolverSettings
 from ..numba_support import njit
-from .solvers import _SCALE_SLACK, _empty, _wrap
+from .ransac_numba import _cumulate, _draw_row, draw_uniforms
+from .solvers import _SCALE_SLACK, _empty, _wrap, sample_scale_noise
 
 
 @njit
@@ -36,9 +42,105 @@ def _sign(cos):
     return -1.0 if cos < 0 else 1.0
 
 
+# --------------------------------------------------------------------------------------
+# 3L, free / prior scale
+# --------------------------------------------------------------------------------------
+
+
 @njit
-def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table, sin_table, n_bev,
-           normal_consistency, plausible_lo, plausible_hi, sin_par, singular_tolerance, min_scale, max_scale):
+def _screen_3l(i0, i1, i2, j0, j1, j2, bnx, bny, bd, fnx, fny, fd, cos_table, sin_table, n_bev, limits):
+    """The two cheap tests of a 3L sample: (passed, c, sn, cos1, cos2), c and sn the
+    cos and sin of its anchor rotation, cos1 and cos2 the signed cosines of lines 1 and
+    2. Every value is computed and the tests combined without branching, so a loop of
+    screens does not stall on the unpredictable outcomes (about half the drawn samples
+    fail the first test, most of the rest the second)."""
+    normal_consistency, plausible_lo, plausible_hi = limits[0], limits[1], limits[2]
+    # rotation of the anchor pair, from the per-(floorplan line, BEV line) tables
+    pair = np.int64(j0) * n_bev + i0
+    c = cos_table[pair]
+    sn = sin_table[pair]
+    n1x, n1y, n2x, n2y = bnx[i1], bny[i1], bnx[i2], bny[i2]
+    m0x, m0y, m1x, m1y, m2x, m2y = fnx[j0], fny[j0], fnx[j1], fny[j1], fnx[j2], fny[j2]
+    # normal consistency of lines 1 and 2 (_normals_consistent); NaN fails
+    cos1 = (c * n1x - sn * n1y) * m1x + (sn * n1x + c * n1y) * m1y
+    cos2 = (c * n2x - sn * n2y) * m2x + (sn * n2x + c * n2y) * m2y
+    consistent = (abs(cos1) > normal_consistency) & (abs(cos2) > normal_consistency)
+    # scale plausibility from the floorplan normals and the signs (_scale_plausible);
+    # a non-finite numerator or denominator is left for the exact solve to judge
+    sg1 = _sign(cos1)
+    sg2 = _sign(cos2)
+    x12 = m1x * m2y - m2x * m1y
+    x02 = m0x * m2y - m2x * m0y
+    x01 = m0x * m1y - m1x * m0y
+    cof0 = sg1 * sg2 * x12
+    cof1 = -sg2 * x02
+    cof2 = sg1 * x01
+    den = bd[i0] * cof0 + bd[i1] * cof1 + bd[i2] * cof2
+    num = fd[j0] * cof0 + sg1 * fd[j1] * cof1 + sg2 * fd[j2] * cof2
+    a_num = abs(num)
+    a_den = abs(den)
+    inside = (a_num >= plausible_lo * a_den) & (a_num <= plausible_hi * a_den)
+    plausible = inside | (not np.isfinite(num)) | (not np.isfinite(den))
+    return consistent & plausible, c, sn, cos1, cos2
+
+
+@njit
+def _solve_3l_one(i0, i1, i2, j0, j1, j2, bnx, bny, bd, fnx, fny, fd, table, cos_table, sin_table, n_bev, limits):
+    """One 3L sample, BEV lines i0..i2 matched to floorplan lines j0..j2: (kept, tx, ty,
+    theta, s) with theta NOT yet wrapped; kept False (and the rest meaningless) where the
+    numpy path gives no model. limits: (normal_consistency, plausible_lo, plausible_hi,
+    sin_par, singular_tolerance, min_scale, max_scale)."""
+    sin_par, singular_tolerance, min_scale, max_scale = limits[3], limits[4], limits[5], limits[6]
+    passed, c, sn, cos1, cos2 = _screen_3l(i0, i1, i2, j0, j1, j2, bnx, bny, bd, fnx, fny, fd, cos_table, sin_table, n_bev, limits)
+    if not passed:
+        return False, 0.0, 0.0, 0.0, 0.0
+    theta = table[np.int64(j0) * n_bev + i0]
+    n0x, n0y, n1x, n1y, n2x, n2y = bnx[i0], bny[i0], bnx[i1], bny[i1], bnx[i2], bny[i2]
+    m0x, m0y, m1x, m1y, m2x, m2y = fnx[j0], fny[j0], fnx[j1], fny[j1], fnx[j2], fny[j2]
+    d0, d1, d2 = bd[i0], bd[i1], bd[i2]
+    e0, e1, e2 = fd[j0], fd[j1], fd[j2]
+    sg1 = _sign(cos1)
+    sg2 = _sign(cos2)
+
+    # all three BEV normals pairwise parallel: no model (_solve_3l_components)
+    if (abs(n0x * n1y - n0y * n1x) < sin_par and abs(n0x * n2y - n0y * n2x) < sin_par
+            and abs(n1x * n2y - n1y * n2x) < sin_par):
+        return False, 0.0, 0.0, 0.0, 0.0
+
+    # rows s d_k - u_k.t = sigma_k e_k: A = [D, -sigma m_x, -sigma m_y], rhs sigma e;
+    # the anchor's cosine is computed here, lines 1 and 2 reuse the normal test's
+    cos0 = (c * n0x - sn * n0y) * m0x + (sn * n0x + c * n0y) * m0y
+    sg0 = _sign(cos0)
+    a10, a11, a12 = -(sg0 * m0x), -(sg1 * m1x), -(sg2 * m2x)
+    a20, a21, a22 = -(sg0 * m0y), -(sg1 * m1y), -(sg2 * m2y)
+    se0, se1, se2 = sg0 * e0, sg1 * e1, sg2 * e2
+    det = _det3(d0, d1, d2, a10, a11, a12, a20, a21, a22)
+    # Hadamard's bound; np.maximum(row_norms, 1e-300) propagates a NaN, and a NaN
+    # bound makes the sample irregular as in numpy
+    r0 = np.sqrt(d0 * d0 + a10 * a10 + a20 * a20)
+    r1 = np.sqrt(d1 * d1 + a11 * a11 + a21 * a21)
+    r2 = np.sqrt(d2 * d2 + a12 * a12 + a22 * a22)
+    row_norms = r0 * r1 * r2
+    bound = row_norms if (row_norms >= 1e-300 or np.isnan(row_norms)) else 1e-300
+    if not abs(det) > singular_tolerance * bound:
+        return False, 0.0, 0.0, 0.0, 0.0
+    s = _det3(se0, se1, se2, a10, a11, a12, a20, a21, a22) / det
+    tx = _det3(d0, d1, d2, se0, se1, se2, a20, a21, a22) / det
+    ty = _det3(d0, d1, d2, a10, a11, a12, se0, se1, se2) / det
+    if s < 0:  # the R n_1 = -m_1 candidate
+        theta = theta + np.pi
+    s = abs(s)
+    # _scale_ok and _pack's finiteness filter; theta is finite exactly when its
+    # wrapped value is (the wrap of inf is NaN)
+    if not (np.isfinite(s) and s >= min_scale and s <= max_scale):
+        return False, 0.0, 0.0, 0.0, 0.0
+    if not (np.isfinite(tx) and np.isfinite(ty) and np.isfinite(theta)):
+        return False, 0.0, 0.0, 0.0, 0.0
+    return True, tx, ty, theta, s
+
+
+@njit
+def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table, sin_table, n_bev, limits):
     """Models (tx, ty, theta, s) with theta NOT yet wrapped, and the index of the sample
     each came from, in sample order. Buffers are sized for every sample surviving and
     trimmed at the end (untouched pages of the over-allocation cost nothing)."""
@@ -47,85 +149,109 @@ def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table,
     src = np.empty(n, np.int64)
     kept = 0
     for i in range(n):
-        # rotation of the anchor pair, from the per-(floorplan line, BEV line) tables
-        pair = np.int64(f0[i]) * n_bev + b0[i]
-        theta = table[pair]
-        c = cos_table[pair]
-        sn = sin_table[pair]
-        i0, i1, i2 = b0[i], b1[i], b2[i]
-        j0, j1, j2 = f0[i], f1[i], f2[i]
-        n0x, n0y, n1x, n1y, n2x, n2y = bnx[i0], bny[i0], bnx[i1], bny[i1], bnx[i2], bny[i2]
-        m0x, m0y, m1x, m1y, m2x, m2y = fnx[j0], fny[j0], fnx[j1], fny[j1], fnx[j2], fny[j2]
-
-        # normal consistency of lines 1 and 2 (_normals_consistent); NaN fails
-        cos1 = (c * n1x - sn * n1y) * m1x + (sn * n1x + c * n1y) * m1y
-        if not abs(cos1) > normal_consistency:
-            continue
-        cos2 = (c * n2x - sn * n2y) * m2x + (sn * n2x + c * n2y) * m2y
-        if not abs(cos2) > normal_consistency:
-            continue
-
-        # scale plausibility from the floorplan normals and the signs (_scale_plausible);
-        # a non-finite numerator or denominator is left for the exact solve to judge
-        sg1 = _sign(cos1)
-        sg2 = _sign(cos2)
-        x12 = m1x * m2y - m2x * m1y
-        x02 = m0x * m2y - m2x * m0y
-        x01 = m0x * m1y - m1x * m0y
-        cof0 = sg1 * sg2 * x12
-        cof1 = -sg2 * x02
-        cof2 = sg1 * x01
-        d0, d1, d2 = bd[i0], bd[i1], bd[i2]
-        e0, e1, e2 = fd[j0], fd[j1], fd[j2]
-        den = d0 * cof0 + d1 * cof1 + d2 * cof2
-        num = e0 * cof0 + sg1 * e1 * cof1 + sg2 * e2 * cof2
-        a_num = abs(num)
-        a_den = abs(den)
-        inside = (a_num >= plausible_lo * a_den) and (a_num <= plausible_hi * a_den)
-        if not (inside or not np.isfinite(num) or not np.isfinite(den)):
-            continue
-
-        # all three BEV normals pairwise parallel: no model (_solve_3l_components)
-        if (abs(n0x * n1y - n0y * n1x) < sin_par and abs(n0x * n2y - n0y * n2x) < sin_par
-                and abs(n1x * n2y - n1y * n2x) < sin_par):
-            continue
-
-        # rows s d_k - u_k.t = sigma_k e_k: A = [D, -sigma m_x, -sigma m_y], rhs sigma e;
-        # the anchor's cosine is computed here, lines 1 and 2 reuse the normal test's
-        cos0 = (c * n0x - sn * n0y) * m0x + (sn * n0x + c * n0y) * m0y
-        sg0 = _sign(cos0)
-        a10, a11, a12 = -(sg0 * m0x), -(sg1 * m1x), -(sg2 * m2x)
-        a20, a21, a22 = -(sg0 * m0y), -(sg1 * m1y), -(sg2 * m2y)
-        se0, se1, se2 = sg0 * e0, sg1 * e1, sg2 * e2
-        det = _det3(d0, d1, d2, a10, a11, a12, a20, a21, a22)
-        # Hadamard's bound; np.maximum(row_norms, 1e-300) propagates a NaN, and a NaN
-        # bound makes the sample irregular as in numpy
-        r0 = np.sqrt(d0 * d0 + a10 * a10 + a20 * a20)
-        r1 = np.sqrt(d1 * d1 + a11 * a11 + a21 * a21)
-        r2 = np.sqrt(d2 * d2 + a12 * a12 + a22 * a22)
-        row_norms = r0 * r1 * r2
-        bound = row_norms if (row_norms >= 1e-300 or np.isnan(row_norms)) else 1e-300
-        if not abs(det) > singular_tolerance * bound:
-            continue
-        s = _det3(se0, se1, se2, a10, a11, a12, a20, a21, a22) / det
-        tx = _det3(d0, d1, d2, se0, se1, se2, a20, a21, a22) / det
-        ty = _det3(d0, d1, d2, a10, a11, a12, se0, se1, se2) / det
-        if s < 0:  # the R n_1 = -m_1 candidate
-            theta = theta + np.pi
-        s = abs(s)
-        # _scale_ok and _pack's finiteness filter; theta is finite exactly when its
-        # wrapped value is (the wrap of inf is NaN)
-        if not (np.isfinite(s) and s >= min_scale and s <= max_scale):
-            continue
-        if not (np.isfinite(tx) and np.isfinite(ty) and np.isfinite(theta)):
-            continue
-        out[kept, 0] = tx
-        out[kept, 1] = ty
-        out[kept, 2] = theta
-        out[kept, 3] = s
-        src[kept] = i
-        kept += 1
+        ok, tx, ty, theta, s = _solve_3l_one(b0[i], b1[i], b2[i], f0[i], f1[i], f2[i], bnx, bny, bd, fnx, fny, fd,
+                                             table, cos_table, sin_table, n_bev, limits)
+        if ok:
+            out[kept, 0] = tx
+            out[kept, 1] = ty
+            out[kept, 2] = theta
+            out[kept, 3] = s
+            src[kept] = i
+            kept += 1
     return out[:kept].copy(), src[:kept].copy()
+
+
+# draws per block of _drawn_3l: its buffers stay in the L1 cache
+_BLOCK = 512
+
+
+@njit
+def _drawn_3l(starts, sizes, counts, uniform, p0, p1, p2, rows, bnx, bny, bd, fnx, fny, fd, table, cos_table, sin_table, n_bev,
+              limits):
+    """ransac_numba._draw_rows and _solve in one loop: BEV sample b (lines p0[b], p1[b],
+    p2[b]) meets counts[b] floorplan triplets, the table rows (of rows, (T, 3)) drawn as
+    _draw_rows draws them. Models with theta NOT yet wrapped, and the draw each came
+    from, in draw order.
+
+    A block of draws at a time, in three passes: the rows and their floorplan lines (the
+    table lookups, random memory accesses, independent of one another so they overlap),
+    the branch-free screen (_screen_3l), then the full solve of the samples that passed
+    it (which screens them again: the same function of the same values, so the same
+    outcome)."""
+    total = uniform.shape[0]
+    out = np.empty((total, 4), np.float64)
+    src = np.empty(total, np.int64)
+    cum = np.empty(sizes.shape[1], np.int64)
+    query = np.empty(_BLOCK, np.int64)
+    lines = np.empty((_BLOCK, 3), np.int64)
+    passed = np.empty(_BLOCK, np.int64)
+    kept = 0
+    b, n, left = -1, 0, 0  # the current query, its candidates and draws left
+    j = 0
+    while j < total:
+        m = min(_BLOCK, total - j)
+        for k in range(m):
+            while left == 0:  # total = sum(counts): a query with draws follows
+                b += 1
+                n = _cumulate(sizes, b, cum)
+                left = counts[b]
+            row = _draw_row(starts, sizes, cum, b, n, uniform[j + k])
+            query[k] = b
+            lines[k, 0] = rows[row, 0]
+            lines[k, 1] = rows[row, 1]
+            lines[k, 2] = rows[row, 2]
+            left -= 1
+        count = 0
+        for k in range(m):
+            q = query[k]
+            ok = _screen_3l(p0[q], p1[q], p2[q], lines[k, 0], lines[k, 1], lines[k, 2], bnx, bny, bd, fnx, fny, fd,
+                            cos_table, sin_table, n_bev, limits)[0]
+            passed[count] = k
+            count += ok
+        for h in range(count):
+            k = passed[h]
+            q = query[k]
+            ok, tx, ty, theta, s = _solve_3l_one(p0[q], p1[q], p2[q], lines[k, 0], lines[k, 1], lines[k, 2], bnx, bny, bd, fnx, fny,
+                                                 fd, table, cos_table, sin_table, n_bev, limits)
+            if ok:
+                out[kept, 0] = tx
+                out[kept, 1] = ty
+                out[kept, 2] = theta
+                out[kept, 3] = s
+                src[kept] = j + k
+                kept += 1
+        j += m
+    return out[:kept].copy(), src[:kept].copy()
+
+
+def _rotation_table(bev_angles, fp_angles, *shifts):
+    """As the numpy paths: theta = fp_angle - bev_angle per (floorplan line, BEV line)
+    pair (row-major, pair = fp line * n_bev + BEV line), and cos and sin of theta + shift
+    for each shift."""
+    table = (fp_angles[:, None] - bev_angles[None, :]).ravel()
+    trig = []
+    for shift in shifts:
+        t = table if shift is None else table + shift
+        trig += [np.cos(t), np.sin(t)]
+    return table, trig
+
+
+def _limits_3l(settings: SolverSettings) -> tuple:
+    sin_par = float(np.sin(np.deg2rad(settings.parallel_angle_deg)))
+    return (float(settings.normal_consistency), settings.min_scale / _SCALE_SLACK, settings.max_scale * _SCALE_SLACK, sin_par,
+            float(settings.singular_tolerance), float(settings.min_scale), float(settings.max_scale))
+
+
+def _lines(lines):
+    """Normal components and offsets of a LineSet, contiguous float64."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (lines.normals[:, 0], lines.normals[:, 1], lines.offsets))
+
+
+def _wrapped(models, source):
+    if len(source) == 0:
+        return _empty()
+    models[:, 2] = _wrap(models[:, 2])
+    return models, source
 
 
 def solve_3l_indexed(bnx, bny, bev_offsets, fnx, fny, fp_offsets, b, f, bev_angles, fp_angles, settings: SolverSettings):
@@ -133,18 +259,201 @@ def solve_3l_indexed(bnx, bny, bev_offsets, fnx, fny, fp_offsets, b, f, bev_angl
     floorplan normal components and offsets (float64), b and f three index arrays each
     (any integer dtype, non-empty), the normal angles of both line sets. The same models
     and source indices, in the same order, bit for bit."""
-    # as the numpy path: theta, cos and sin per (floorplan line, BEV line) pair
-    table = (fp_angles[:, None] - bev_angles[None, :]).ravel()
-    cos_table, sin_table = np.cos(table), np.sin(table)
-    sin_par = float(np.sin(np.deg2rad(settings.parallel_angle_deg)))
+    table, (cos_table, sin_table) = _rotation_table(bev_angles, fp_angles, None)
     idx = [np.ascontiguousarray(v) for v in (*b, *f)]
     models, source = _solve(
         bnx, bny, np.ascontiguousarray(bev_offsets), fnx, fny, np.ascontiguousarray(fp_offsets), *idx,
-        table, cos_table, sin_table, len(bev_angles),
-        settings.normal_consistency, settings.min_scale / _SCALE_SLACK, settings.max_scale * _SCALE_SLACK, sin_par,
-        settings.singular_tolerance, settings.min_scale, settings.max_scale,
+        table, cos_table, sin_table, len(bev_angles), _limits_3l(settings),
     )
-    if len(source) == 0:
+    return _wrapped(models, source)
+
+
+def _pick_columns(picks):
+    return [np.ascontiguousarray(picks[:, k], dtype=np.int64) for k in range(picks.shape[1])]
+
+
+def drawn_3l(starts, sizes, fraction: float, rng: np.random.Generator, picks, rows, bev_lines, fp_lines, bev_angles, fp_angles,
+             settings: SolverSettings):
+    """ransac._draw then solvers.solve_3l_indexed (free / prior scale) on the drawn
+    samples, in one compiled loop: BEV triplets picks (B, 3), the floorplan triplet table
+    rows (T, 3) (its row r: the lines of candidate r), the queries' candidate ranges
+    (starts, sizes) and the match fraction. Takes the same random numbers from rng and
+    gives the same models and draw indices, in the same order, bit for bit."""
+    starts, sizes, counts, uniform = draw_uniforms(starts, sizes, fraction, rng)
+    if len(uniform) == 0:
         return _empty()
-    models[:, 2] = _wrap(models[:, 2])
-    return models, source
+    table, (cos_table, sin_table) = _rotation_table(bev_angles, fp_angles, None)
+    models, source = _drawn_3l(starts, sizes, counts, uniform, *_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), *_lines(bev_lines), *_lines(fp_lines),
+                               table, cos_table, sin_table, len(bev_angles), _limits_3l(settings))
+    return _wrapped(models, source)
+
+
+# --------------------------------------------------------------------------------------
+# two lines, known scale (solvers._solve_two_lines)
+# --------------------------------------------------------------------------------------
+
+
+@njit
+def _two_lines_candidate(c, sn, n0x, n0y, n1x, n1y, m0x, m0y, m1x, m1y, d0, d1, e0, e1, s, normal_consistency, sin_par):
+    """One rotation candidate of _solve_two_lines (cos c, sin sn of its angle): (kept, tx,
+    ty); the sample's own tests (parallel BEV lines, scale) are the caller's."""
+    # _rotate then _signed_fp's einsum: rn . m
+    cos0 = (c * n0x - sn * n0y) * m0x + (sn * n0x + c * n0y) * m0y
+    cos1 = (c * n1x - sn * n1y) * m1x + (sn * n1x + c * n1y) * m1y
+    if not abs(cos1) > normal_consistency:  # NaN fails
+        return False, 0.0, 0.0
+    sg0 = _sign(cos0)
+    sg1 = _sign(cos1)
+    u0x, u0y, u1x, u1y = sg0 * m0x, sg0 * m0y, sg1 * m1x, sg1 * m1y
+    # u_i.t = s d_i - sigma_i e_i by Cramer's rule; parallel u: no model
+    det = u0x * u1y - u0y * u1x
+    if abs(det) < sin_par:
+        return False, 0.0, 0.0
+    rhs0 = s * d0 - sg0 * e0
+    rhs1 = s * d1 - sg1 * e1
+    tx = (rhs0 * u1y - rhs1 * u0y) / det
+    ty = (u0x * rhs1 - u1x * rhs0) / det
+    if not (np.isfinite(tx) and np.isfinite(ty)):
+        return False, 0.0, 0.0
+    return True, tx, ty
+
+
+@njit
+def _solve_2l_one(i0, i1, j0, j1, s, bnx, bny, bd, fnx, fny, fd, table, trig, n_bev, check_scale, limits):
+    """One two-line sample with scale s, BEV lines i0, i1 matched to floorplan lines j0, j1:
+    (theta_a, kept_a, tx_a, ty_a, theta_b, kept_b, tx_b, ty_b) for the candidates
+    R n_1 = m_1 (a) and R n_1 = -m_1 (b), theta NOT yet wrapped. trig: cos and sin of
+    theta + 0.0 and of theta + pi per pair; limits: (normal_consistency, sin_par,
+    min_scale, max_scale)."""
+    normal_consistency, sin_par, min_scale, max_scale = limits
+    cos_a, sin_a, cos_b, sin_b = trig
+    pair = np.int64(j0) * n_bev + i0
+    theta_a = table[pair] + 0.0  # as theta0 + flip: turns a -0.0 into +0.0
+    theta_b = table[pair] + np.pi
+    n0x, n0y, n1x, n1y = bnx[i0], bny[i0], bnx[i1], bny[i1]
+    # the sample's tests (_parallel of the BEV normals, _scale_ok) and _pack's finiteness
+    # of s and theta (finite exactly when its wrap is)
+    ok = not abs(n0x * n1y - n0y * n1x) < sin_par
+    if check_scale:
+        ok = ok and np.isfinite(s) and s >= min_scale and s <= max_scale
+    ok = ok and np.isfinite(s)
+    if not ok:
+        return theta_a, False, 0.0, 0.0, theta_b, False, 0.0, 0.0
+    m0x, m0y, m1x, m1y = fnx[j0], fny[j0], fnx[j1], fny[j1]
+    d0, d1, e0, e1 = bd[i0], bd[i1], fd[j0], fd[j1]
+    ok_a, tx_a, ty_a = _two_lines_candidate(cos_a[pair], sin_a[pair], n0x, n0y, n1x, n1y, m0x, m0y, m1x, m1y, d0, d1, e0, e1, s,
+                                            normal_consistency, sin_par)
+    ok_b, tx_b, ty_b = _two_lines_candidate(cos_b[pair], sin_b[pair], n0x, n0y, n1x, n1y, m0x, m0y, m1x, m1y, d0, d1, e0, e1, s,
+                                            normal_consistency, sin_par)
+    ok_a = ok_a and np.isfinite(theta_a)
+    ok_b = ok_b and np.isfinite(theta_b)
+    return theta_a, ok_a, tx_a, ty_a, theta_b, ok_b, tx_b, ty_b
+
+
+@njit
+def _write_2l(out, src, kept, i, s, res):
+    """Appends sample i's surviving candidates, a before b (_merge_by_source's order)."""
+    theta_a, ok_a, tx_a, ty_a, theta_b, ok_b, tx_b, ty_b = res
+    if ok_a:
+        out[kept, 0] = tx_a
+        out[kept, 1] = ty_a
+        out[kept, 2] = theta_a
+        out[kept, 3] = s
+        src[kept] = i
+        kept += 1
+    if ok_b:
+        out[kept, 0] = tx_b
+        out[kept, 1] = ty_b
+        out[kept, 2] = theta_b
+        out[kept, 3] = s
+        src[kept] = i
+        kept += 1
+    return kept
+
+
+@njit
+def _solve_2l(bnx, bny, bd, fnx, fny, fd, b0, b1, f0, f1, scales, table, trig, n_bev, check_scale, limits):
+    """Models (tx, ty, theta, s) with theta NOT yet wrapped and their sample indices, in
+    sample order, each sample's candidate a before b."""
+    n = b0.shape[0]
+    out = np.empty((2 * n, 4), np.float64)
+    src = np.empty(2 * n, np.int64)
+    kept = 0
+    for i in range(n):
+        res = _solve_2l_one(b0[i], b1[i], f0[i], f1[i], scales[i], bnx, bny, bd, fnx, fny, fd, table, trig, n_bev, check_scale, limits)
+        kept = _write_2l(out, src, kept, i, scales[i], res)
+    return out[:kept].copy(), src[:kept].copy()
+
+
+@njit
+def _drawn_2l(starts, sizes, counts, uniform, p0, p1, rows, scales, bnx, bny, bd, fnx, fny, fd, table, trig, n_bev,
+              check_scale, limits):
+    """ransac_numba._draw_rows and _solve_2l in one loop (as _drawn_3l, for pairs: rows
+    (P, 2)); draw j has scale scales[j]."""
+    total = uniform.shape[0]
+    out = np.empty((2 * total, 4), np.float64)
+    src = np.empty(2 * total, np.int64)
+    cum = np.empty(sizes.shape[1], np.int64)
+    kept = 0
+    j = 0
+    for b in range(starts.shape[0]):
+        n = _cumulate(sizes, b, cum)
+        i0, i1 = p0[b], p1[b]
+        for _ in range(counts[b]):
+            row = _draw_row(starts, sizes, cum, b, n, uniform[j])
+            res = _solve_2l_one(i0, i1, rows[row, 0], rows[row, 1], scales[j], bnx, bny, bd, fnx, fny, fd, table, trig, n_bev,
+                                check_scale, limits)
+            kept = _write_2l(out, src, kept, j, scales[j], res)
+            j += 1
+    return out[:kept].copy(), src[:kept].copy()
+
+
+def _limits_2l(settings: SolverSettings) -> tuple:
+    sin_par = float(np.sin(np.deg2rad(settings.parallel_angle_deg)))
+    return float(settings.normal_consistency), sin_par, float(settings.min_scale), float(settings.max_scale)
+
+
+def _rotation_2l(bev_angles, fp_angles):
+    """theta per pair, and (cos, sin) of theta + 0.0 and theta + pi: _solve_two_lines's
+    theta0 + flip, the angles it rotates by."""
+    table, trig = _rotation_table(bev_angles, fp_angles, 0.0, np.pi)
+    return table, tuple(trig)
+
+
+def solve_two_lines_indexed(bev_lines, fp_lines, b, f, scales, bev_angles, fp_angles, settings: SolverSettings,
+                            skip_scale_check: bool = False):
+    """solvers._solve_two_lines on the gathered samples, compiled: BEV lines b = (b0, b1)
+    matched to floorplan lines f = (f0, f1) (index arrays), scales (B,) float64, the
+    normal angles of both line sets. The same models and source indices, in the same
+    order, bit for bit."""
+    if len(scales) == 0:
+        return _empty()
+    table, trig = _rotation_2l(bev_angles, fp_angles)
+    idx = [np.ascontiguousarray(v) for v in (*b, *f)]
+    models, source = _solve_2l(*_lines(bev_lines), *_lines(fp_lines), *idx, np.ascontiguousarray(scales, dtype=np.float64),
+                               table, trig, len(bev_angles), not skip_scale_check, _limits_2l(settings))
+    return _wrapped(models, source)
+
+
+def drawn_2l(starts, sizes, fraction: float, rng: np.random.Generator, picks, rows, bev_lines, fp_lines, bev_angles, fp_angles,
+             scale_prior: float, settings: SolverSettings, scale_mode: str):
+    """ransac._draw then solvers.solve_2l (prior or fixed scale_mode) on the drawn samples,
+    in one compiled loop: BEV pairs picks (B, 2), the floorplan pair table rows
+    (P, 2). Takes the same random numbers from rng in the
+    same order (the draws' uniforms, then at a prior the scale noise, one per draw) and
+    gives the same models and draw indices, in the same order, bit for bit."""
+    starts, sizes, counts, uniform = draw_uniforms(starts, sizes, fraction, rng)
+    total = len(uniform)
+    if scale_mode == "fixed":
+        scales, check_scale = np.ones(total), False
+    else:
+        if not (np.isfinite(scale_prior) and scale_prior > 0):
+            return _empty()
+        with np.errstate(all="ignore"):  # as solve_2l (_quiet)
+            scales, check_scale = scale_prior + sample_scale_noise(total, scale_prior, settings, rng), True
+    if total == 0:
+        return _empty()
+    table, trig = _rotation_2l(bev_angles, fp_angles)
+    models, source = _drawn_2l(starts, sizes, counts, uniform, *_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), scales, *_lines(bev_lines), *_lines(fp_lines),
+                               table, trig, len(bev_angles), check_scale, _limits_2l(settings))
+    return _wrapped(models, source)
