@@ -91,12 +91,18 @@ def _connected_run(t: np.ndarray, t_ref: float, gap: float) -> np.ndarray | None
     return order[lo : hi + 1]
 
 
-def extract_lines(points, settings: LineSettings, rng: np.random.Generator) -> LineSet:
+def extract_lines(points, settings: LineSettings, rng: np.random.Generator, kernels: str = "numpy") -> LineSet:
     """Line segments by seeded region growing; sorted by length, longest first.
 
     points: (N, 2) metres. Empty input gives an empty set; NaN/inf raise InputError.
+    kernels="numba": the compiled seed loop (primitives_numba: the same lines, the same
+    random numbers; coordinates may differ in the last bits, see there).
     """
     pts = as_points(points)
+    if kernels == "numba":
+        from .primitives_numba import extract_lines as compiled
+
+        return compiled(pts, settings, rng)
     n = len(pts)
     if n < max(settings.min_points, 2):
         return LineSet.empty()

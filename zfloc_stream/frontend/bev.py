@@ -499,6 +499,6 @@ def _extract_primitives(points: np.ndarray, settings: Settings, rng: np.random.G
         from ..primitives import extract_circles, extract_lines
     except ImportError:  # primitives module not available: alignment has no primitives
         return LineSet.empty(), CircleSet.empty()
-    lines = extract_lines(points, settings.primitives.lines, rng)
+    lines = extract_lines(points, settings.primitives.lines, rng, kernels=settings.estimator.kernels)
     circles = extract_circles(points, settings.primitives.circles, rng)
     return lines, circles
