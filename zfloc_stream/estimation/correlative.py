@@ -244,6 +244,14 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     spec = conj_spec * values
     # the inverse keeps only the n_i rows of valid placements before its row transform
     score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
+    picked = _pick_peaks(score, per_angle)
+    return None if picked is None else (*picked, conj_spec)
+
+
+def _pick_peaks(score: np.ndarray, per_angle: int):
+    """(flat indices i * n_j + j, counts) of the per_angle best placements of a float32
+    correlation score (n_i, n_j), or None when its counts cannot be vouched for."""
+    n_j = score.shape[1]
     # the per_angle-th largest count is at least the per_angle-th largest row maximum, so
     # every placement at or above it lies in these rows: cand holds all of them, ascending
     row_max = score.max(axis=1)
@@ -256,7 +264,7 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
         return None
     keep = _spread_best(counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
-    return cand[keep], counts[keep], conj_spec
+    return cand[keep], counts[keep]
 
 
 def correlative_models(
@@ -269,6 +277,7 @@ def correlative_models(
     tolerance: float = 0.15,
     peaks: int = 8,
     angles: np.ndarray | None = None,
+    kernels: str = "numpy",
 ) -> np.ndarray:
     """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
     distinct (1 m at the points' centre, or 10 deg).
@@ -281,7 +290,10 @@ def correlative_models(
     whose counts are checked to round to the same integers. Where the
     angle grid holds each angle's 180-degree turn, the turn's template transform comes from
     the angle's own (_mirrored_spectrum: one forward FFT per pair). With every angle
-    searched the result is the reference's, bit for bit."""
+    searched the result is the reference's, bit for bit.
+
+    kernels: "numba" runs the per-angle loop with compiled rasterisation, spectrum products
+    and peak picking (correlative_numba.search_angles): the same models, bit for bit."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))
@@ -302,6 +314,12 @@ def correlative_models(
     # template is a's reflected (checked cell by cell, floor rounding can differ) and its
     # transform then follows from a's (_mirrored_spectrum)
     half_turn = n_angles // 2 if n_angles % 2 == 0 and np.isclose(thetas_grid[n_angles // 2], np.pi) else 0
+    if kernels == "numba":
+        from . import correlative_numba
+
+        found = correlative_numba.search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half, n_i, n_j, per_angle)
+        (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
+        return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
     order = [a + h for a in range(half_turn) for h in (0, half_turn)] + list(range(2 * half_turn, n_angles))
     order = [a for a in order if searched[a]]
     phase = _mirror_phase(side, *_fast_grid(spectrum, side, n_i, n_j)[:2]) if half_turn else None
