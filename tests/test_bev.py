@@ -223,3 +223,90 @@ def test_scan_matching_keeps_the_map_sharp_under_drifting_odometry():
     assert smeared > 0.5 and drifted > 1.0  # the drift is real (measured: 2.4 m and 3.8 m)
     assert sharp < 0.05  # 90% of the wall points within 5 cm of a true wall (measured: 0.025 m)
     assert tracked < 0.1  # (measured: 0.036 m)
+
+
+# --- the compiled observation (estimator.kernels: numba) -------------------------------------
+
+GRID_FIELDS = ("wall_points", "origin", "free", "clearance")
+
+
+def _observations(snapshot_of, overrides=()):
+    """The observation of the same grid with kernels numpy and numba (or the InputError both raise)."""
+    out = []
+    for kernels in ("numpy", "numba"):
+        settings = load_settings(overrides=[*overrides, f"estimator.kernels={kernels}"])
+        try:
+            out.append(snapshot_of(settings).observation(make_rng(0, "obs")))
+        except InputError as err:
+            out.append(err)
+    return out
+
+
+def _assert_same_observation(a, b):
+    assert type(a) is type(b)
+    if isinstance(a, InputError):
+        assert str(a) == str(b)
+        return
+    for name in GRID_FIELDS:  # bit for bit, dtype and shape included
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), name
+    # the primitives: the compiled extractors' own tolerances (tests/test_*_numba.py)
+    assert np.array_equal(a.lines.support, b.lines.support)
+    np.testing.assert_allclose(b.lines.endpoints, a.lines.endpoints, rtol=0, atol=1e-12)
+    assert len(a.circles) == len(b.circles)
+    np.testing.assert_allclose(b.circles.centers, a.circles.centers, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("memory", [0, 3])
+def test_numba_observation_equals_numpy_on_random_grids(memory):
+    """Random grids whose values sit on the thresholds (float32 0.4 vs 0.4, hits at
+    exactly the wall ratio, seen stamps at the memory's edge) and whose known cells fill
+    a sub-rectangle (a crop with and without margins clipped at the grid's border)."""
+    pytest.importorskip("numba")
+    from zfloc_stream.frontend.bev import BevSnapshot
+
+    gen = np.random.default_rng(memory)
+    thresholds = ["bev.occupied_threshold=0.4", "bev.free_threshold=-0.3", "bev.wall_min_ratio=0.3"]
+    raised = 0
+    for trial in range(12):
+        n = 80
+        logodds = np.zeros((n, n), np.float32)
+        wall, hits = np.zeros((n, n), np.uint16), np.zeros((n, n), np.uint16)
+        r0, c0 = gen.integers(0, n // 2, 2)
+        r1, c1 = np.array([r0, c0]) + gen.integers(1, n // 2, 2)
+        if trial == 0:
+            r0, c0, r1, c1 = 0, 0, n, n
+        shape = (r1 - r0, c1 - c0)
+        values = np.array([0.0, 0.4, -0.3, 0.5, -1.0, 2.0, np.nextafter(np.float32(0.4), 1)], np.float32)
+        logodds[r0:r1, c0:c1] = gen.choice(values, shape)
+        hits[r0:r1, c0:c1] = gen.integers(0, 11, shape)
+        wall[r0:r1, c0:c1] = np.where(gen.random(shape) < 0.5, (hits[r0:r1, c0:c1] * 3) // 10, gen.integers(0, 4, shape))
+        stamp = 20
+        seen = gen.integers(stamp - 5, stamp + 1, (n, n)).astype(np.int32)
+        if trial == 1:
+            wall[:] = 0  # no wall cell: both raise
+
+        def snapshot_of(settings):
+            return BevSnapshot(logodds, wall, hits, seen, -7, 11, np.zeros((0, 3)), settings, stamp)
+
+        a, b = _observations(snapshot_of, [*thresholds, f"bev.memory_frames={memory}"])
+        assert trial != 1 or isinstance(a, InputError)
+        raised += isinstance(a, InputError)
+        _assert_same_observation(a, b)
+    assert raised <= 3  # most grids give an observation
+
+
+def test_numba_observation_equals_numpy_on_fused_scans():
+    pytest.importorskip("numba")
+
+    def snapshot_of(settings):
+        bev = RollingBEV(settings)
+        rng = make_rng(5, "noise")
+        for i, (x, y) in enumerate([(2, 2), (3, 3), (5, 3), (7, 2.5)]):
+            bev.add(laser(x, y, 0.3 * i, noise=0.01, rng=rng, t=i))
+        return bev.snapshot()
+
+    for memory in (0, 2):
+        a, b = _observations(snapshot_of, [f"bev.memory_frames={memory}"])
+        assert len(a.wall_points) > 300 and len(a.lines) > 0
+        _assert_same_observation(a, b)

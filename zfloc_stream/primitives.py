@@ -309,9 +309,16 @@ def _candidate_groups(pts: np.ndarray, settings: CircleSettings) -> tuple[np.nda
     return keep, label[keep]
 
 
-def extract_circles(points, settings: CircleSettings, rng: np.random.Generator) -> CircleSet:
-    """Circles (pillars) in 2D wall points; empty input gives an empty set."""
+def extract_circles(points, settings: CircleSettings, rng: np.random.Generator, kernels: str = "numpy") -> CircleSet:
+    """Circles (pillars) in 2D wall points; empty input gives an empty set.
+
+    kernels="numba": the group filter and the per-cluster fits compiled (circles_numba:
+    the same circles from the same random numbers; HDBSCAN is the same sklearn call)."""
     pts = as_points(points)
+    if kernels == "numba":
+        from .circles_numba import extract_circles as compiled
+
+        return compiled(pts, settings, rng)
     if len(pts) < settings.min_cluster_size:
         return CircleSet.empty()
     keep, group = _candidate_groups(pts, settings)

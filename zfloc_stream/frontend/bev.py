@@ -437,6 +437,8 @@ class BevSnapshot:
         self.settings = settings
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
+        if self.settings.estimator.kernels == "numba":
+            return self._observation_numba(rng)
         b = self.settings.bev
         n = self.logodds.shape[0]
         wall = wall_cells(self.wall, self.hits, self.logodds, b)
@@ -458,11 +460,48 @@ class BevSnapshot:
         if b.memory_frames:
             free &= recent[r0:r1, c0:c1]
             occupied &= recent[r0:r1, c0:c1]
-        clearance = exact_distance_cells(~occupied) * b.resolution
-        clearance = np.where(free, clearance, 0.0)
+        clearance = exact_distance_cells(~occupied)
+        clearance *= b.resolution  # in place: the same bits as np.where(free, d * resolution, 0.0)
+        clearance[~free] = 0.0
         origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
         wr, wc = np.nonzero(wall)
         points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
+        lines, circles = _extract_primitives(points, self.settings, rng)
+        return BevObservation(
+            wall_points=points,
+            origin=origin,
+            resolution=b.resolution,
+            free=free,
+            clearance=clearance,
+            lines=lines,
+            circles=circles,
+            trajectory=self.trajectory,
+        )
+
+    def _observation_numba(self, rng: np.random.Generator) -> BevObservation:
+        """observation() with the grid passes compiled (bev_numba): the same observation,
+        bit for bit (the same element-wise tests, the same cv2 distance transform)."""
+        from . import bev_numba
+
+        b = self.settings.bev
+        n = self.logodds.shape[0]
+        occupied, free_threshold = np.float32(b.occupied_threshold), np.float32(b.free_threshold)
+        use_recent = bool(b.memory_frames)
+        oldest = self.stamp - b.memory_frames
+        grids = (self.logodds, self.wall, self.hits, self.seen)
+        any_wall, r_lo, r_hi, c_lo, c_hi = bev_numba.known_extent(
+            *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)
+        if not any_wall:
+            raise InputError("BEV has no wall points yet")
+        m = int(np.ceil(b.crop_margin / b.resolution))
+        r0, r1 = max(r_lo - m, 0), min(r_hi + m + 1, n)
+        c0, c1 = max(c_lo - m, 0), min(c_hi + m + 1, n)
+        origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
+        free, not_occupied, points = bev_numba.crop_masks(
+            *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
+            use_recent, oldest, origin[0], origin[1], b.resolution)
+        distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        clearance = bev_numba.clearance(distance, free, b.resolution)
         lines, circles = _extract_primitives(points, self.settings, rng)
         return BevObservation(
             wall_points=points,
@@ -485,7 +524,9 @@ def exact_distance_cells(mask: np.ndarray) -> np.ndarray:
     and float64 sqrt(k) is what scipy returns. Farther out k may be off by one (one part
     in 2^22); f^v is only compared with tau_v (at most 10 m)."""
     d = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(np.float64)
-    return np.sqrt(np.rint(d * d))
+    np.multiply(d, d, out=d)  # in place: no full-grid temporaries
+    np.rint(d, out=d)
+    return np.sqrt(d, out=d)
 
 
 def _increment(counts: np.ndarray, flat: np.ndarray) -> None:
@@ -500,5 +541,5 @@ def _extract_primitives(points: np.ndarray, settings: Settings, rng: np.random.G
     except ImportError:  # primitives module not available: alignment has no primitives
         return LineSet.empty(), CircleSet.empty()
     lines = extract_lines(points, settings.primitives.lines, rng, kernels=settings.estimator.kernels)
-    circles = extract_circles(points, settings.primitives.circles, rng)
+    circles = extract_circles(points, settings.primitives.circles, rng, kernels=settings.estimator.kernels)
     return lines, circles
