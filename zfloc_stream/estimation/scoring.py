@@ -500,8 +500,14 @@ def rank_coarse_to_fine(
     scorer = scoring_kernels(floorplan, settings, kernels)
     points = sparse_points if len(sparse_points) else bev.wall_points
     coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
-    order = descending(coarse)
-    top = order[distinct(models[order], anchor, settings, settings.top_k)]
+    if kernels == "numba":
+        # the same indices without sorting every model or posing it (scoring_numba.top_distinct)
+        from .scoring_numba import top_distinct
+
+        top = top_distinct(models, coarse, anchor, settings)
+    else:
+        order = descending(coarse)
+        top = order[distinct(models[order], anchor, settings, settings.top_k)]
     scores = score_hypotheses(floorplan, bev, models[top], settings, kernels)
     best = descending(scores.total)
     return Ranking(top[best], Scores(scores.total[best], scores.consistency[best], scores.violation[best]), coarse)
