@@ -57,6 +57,20 @@ tracker update and local refinement of the join (~4 ms, `tracking`) plus the BEV
 start (~1 ms). Joining one frame before the next start (`--set localizer.join_delay=4`) did
 not change the p99 (13.2 ms thread, labels).
 
+With the compiled kernels (issue 10, `--set estimator.kernels=numba`) against numpy, the same
+command alternated twice each, load average 0.4-0.65 (p99 of each run, ms):
+
+                                  numpy        numba
+    labels      pipelined thread    9.5   9.4   11.6   7.9
+    labels      pipelined process  11.8  12.8    7.8  12.3
+    geometric   pipelined thread   12.0  10.8   12.4  10.4
+    geometric   pipelined process  12.3  11.8   10.2  11.8
+    (inline p99: numpy 83-95 ms; numba 29-32 ms geometric, 112-120 ms labels: that first
+    run of the process loads the kernels from numba's cache in its first round, max 229 ms)
+
+Pipelined pushes cost fusion (4-6 ms median) whatever the round costs; their p99 sits at
+8-13 ms either way, so the kernels change the inline push, not the pipelined one.
+
 At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
 pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
 or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
