@@ -91,6 +91,23 @@ def refine(
     return refine_batch(field, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds)[0]
 
 
+def refinable(points, models, settings: RefineSettings, scale_mode: ScaleMode, scale_bounds: tuple[float, float]):
+    """What both refine_batch paths start from: the models (H, 4), their copy to write into,
+    the thinned points, whether the scale is free, the log scale bounds, log s per model
+    and which models can be refined (finite, positive scale, within the bounds when free)."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    out = models.copy()
+    pts = thin_points(points, settings.max_points)
+    free_scale = scale_mode != "fixed"
+    lo, hi = np.log(scale_bounds[0]), np.log(scale_bounds[1])
+    with np.errstate(all="ignore"):
+        log_s = np.log(models[:, 3])
+    ok = np.isfinite(models).all(axis=1) & (models[:, 3] > 0)
+    if free_scale:
+        ok &= (log_s >= lo) & (log_s <= hi)
+    return models, out, pts, free_scale, lo, hi, log_s, ok
+
+
 def refine_batch(
     field,
     points: np.ndarray,
@@ -111,16 +128,7 @@ def refine_batch(
         from .refine_numba import refine_batch_numba  # the optional [fast] extra, imported on first use
 
         return refine_batch_numba(field, points, models, settings, scale_mode, scale_bounds)
-    models = np.asarray(models, dtype=float).reshape(-1, 4)
-    out = models.copy()
-    pts = thin_points(points, settings.max_points)
-    free_scale = scale_mode != "fixed"
-    lo, hi = np.log(scale_bounds[0]), np.log(scale_bounds[1])
-    with np.errstate(all="ignore"):
-        log_s = np.log(models[:, 3])
-    ok = np.isfinite(models).all(axis=1) & (models[:, 3] > 0)
-    if free_scale:
-        ok &= (log_s >= lo) & (log_s <= hi)
+    models, out, pts, free_scale, lo, hi, log_s, ok = refinable(points, models, settings, scale_mode, scale_bounds)
     if len(pts) < 4 or not ok.any():
         return out
     delta, cutoff = settings.huber_delta, settings.outlier_distance

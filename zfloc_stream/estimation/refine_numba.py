@@ -29,7 +29,7 @@ import numpy as np
 
 from ..config import RefineSettings, ScaleMode
 from ..numba_support import njit
-from .refine import thin_points
+from .refine import refinable
 
 
 # Points per evaluation stage. A point's lookup is a long dependency chain (transform,
@@ -280,16 +280,7 @@ def refine_batch_numba(
 ) -> np.ndarray:
     """refine.refine_batch with the LM loop compiled: same arguments, same output
     conventions (rows that cannot be refined come back unchanged)."""
-    models = np.asarray(models, dtype=float).reshape(-1, 4)
-    out = models.copy()
-    pts = thin_points(points, settings.max_points)
-    free_scale = scale_mode != "fixed"
-    lo, hi = np.log(scale_bounds[0]), np.log(scale_bounds[1])
-    with np.errstate(all="ignore"):
-        log_s = np.log(models[:, 3])
-    ok = np.isfinite(models).all(axis=1) & (models[:, 3] > 0)
-    if free_scale:
-        ok &= (log_s >= lo) & (log_s <= hi)
+    models, out, pts, free_scale, lo, hi, log_s, ok = refinable(points, models, settings, scale_mode, scale_bounds)
     if len(pts) < 4 or not ok.any():
         return out
     grid = np.ascontiguousarray(field.distance_field)  # float32 or float64, as given

@@ -466,11 +466,15 @@ class BevSnapshot:
         origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
         wr, wc = np.nonzero(wall)
         points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
+        return self._with_primitives(points, origin, free, clearance, rng)
+
+    def _with_primitives(self, points, origin, free, clearance, rng: np.random.Generator) -> BevObservation:
+        """The observation of the cropped grids, with the lines and circles of its wall points."""
         lines, circles = _extract_primitives(points, self.settings, rng)
         return BevObservation(
             wall_points=points,
             origin=origin,
-            resolution=b.resolution,
+            resolution=self.settings.bev.resolution,
             free=free,
             clearance=clearance,
             lines=lines,
@@ -502,17 +506,7 @@ class BevSnapshot:
             use_recent, oldest, origin[0], origin[1], b.resolution)
         distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         clearance = bev_numba.clearance(distance, free, b.resolution)
-        lines, circles = _extract_primitives(points, self.settings, rng)
-        return BevObservation(
-            wall_points=points,
-            origin=origin,
-            resolution=b.resolution,
-            free=free,
-            clearance=clearance,
-            lines=lines,
-            circles=circles,
-            trajectory=self.trajectory,
-        )
+        return self._with_primitives(points, origin, free, clearance, rng)
 
 
 
