@@ -275,6 +275,17 @@ def test_sessions_record_their_environment_and_a_replay_elsewhere_says_so(record
     assert lines.index(note[0]) < next(i for i, line in enumerate(lines) if line.startswith(("identical", "same decisions")))
 
 
+def test_the_numba_version_is_compared_only_when_recorded():
+    """Sessions from before the compiled kernels do not record numba: not a difference.
+    One that does and differs (its kernels may round differently) is reported."""
+    from zfloc_stream.session import environment
+
+    here = environment.current()
+    before_kernels = {k: v for k, v in here.items() if k != "numba"}
+    assert environment.differences(before_kernels) == []
+    assert environment.differences({**here, "numba": "0.0.1"}) == [f"numba: 0.0.1 -> {here['numba']}"]
+
+
 def test_sample_replays_in_a_perturbed_environment(capsys):
     """Another environment in a fresh process: OpenBLAS forced onto its generic kernels
     (OPENBLAS_CORETYPE) and numpy's dispatched SIMD kernels disabled

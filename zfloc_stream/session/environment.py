@@ -9,13 +9,17 @@ with its own and says in one line what differs.
 from __future__ import annotations
 
 import platform
+from importlib import metadata
 from functools import cache
 from pathlib import Path
 
 from .. import __version__
 
 # the keys compared between the recording and the replay, in the order they are reported
-KEYS = ("zfloc_stream", "python", "numpy", "scipy", "blas", "simd", "machine", "cpu")
+KEYS = ("zfloc_stream", "python", "numpy", "scipy", "numba", "blas", "simd", "machine", "cpu")
+# recorded only since the compiled kernels (estimator.kernels: numba): a session from before
+# does not say, and is not reported as different for that
+OPTIONAL_KEYS = ("numba",)
 
 
 def _numpy_simd() -> str:
@@ -58,6 +62,14 @@ def _cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def _installed_version(package: str) -> str:
+    """The installed version of an optional package, without importing it ('none' if absent)."""
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "none"
+
+
 @cache
 def current() -> dict[str, str]:
     """This process's environment (computed once: it cannot change while running)."""
@@ -69,6 +81,7 @@ def current() -> dict[str, str]:
         "python": platform.python_version(),
         "numpy": numpy.__version__,
         "scipy": scipy.__version__,
+        "numba": _installed_version("numba"),
         "blas": _blas(),
         "simd": _numpy_simd(),
         "machine": f"{platform.system()} {platform.machine()}",
@@ -79,7 +92,8 @@ def current() -> dict[str, str]:
 def differences(recorded: dict[str, str], here: dict[str, str] | None = None) -> list[str]:
     """'key: recorded -> here' for each fact that differs."""
     here = current() if here is None else here
-    return [f"{k}: {recorded.get(k, '?')} -> {here.get(k, '?')}" for k in KEYS if recorded.get(k) != here.get(k)]
+    return [f"{k}: {recorded.get(k, '?')} -> {here.get(k, '?')}" for k in KEYS
+            if recorded.get(k) != here.get(k) and not (k in OPTIONAL_KEYS and k not in recorded)]
 
 
 def describe(recorded: dict[str, str] | None) -> str:
@@ -88,5 +102,5 @@ def describe(recorded: dict[str, str] | None) -> str:
         return "environment: the session does not record where it was made"
     diff = differences(recorded)
     if not diff:
-        return "environment: same as the recording (zfloc-stream, python, numpy, scipy, BLAS, SIMD, CPU)"
+        return "environment: same as the recording (zfloc-stream, python, numpy, scipy, numba, BLAS, SIMD, CPU)"
     return "environment: recorded elsewhere: " + "; ".join(diff)
