@@ -142,3 +142,34 @@ def test_fused_without_candidates():
                          ransac._line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "prior")
     assert models.shape == (0, 4)
     assert a.random() == b.random()
+
+
+def _random_lines(gen, n, angle_choices):
+    """n segments, directions drawn from angle_choices (repeats: exactly parallel lines)
+    plus some just inside / outside the parallel threshold, scattered over 20 m."""
+    from zfloc_stream.geometry import LineSet
+
+    angles = gen.choice(angle_choices, n) + gen.choice([0.0, 0.0, 1e-9, -1e-9, 0.3, 5.0], n) * np.pi / 180
+    centres = gen.uniform(-10, 10, (n, 2))
+    half = gen.uniform(0.3, 3.0, n)[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    return LineSet.from_endpoints(np.stack([centres - half, centres + half], axis=1))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_bev_triplet_table_equals_numpy(seed):
+    from zfloc_stream.config import Settings
+    from zfloc_stream.observation import BevObservation
+
+    cfg = Settings()
+    gen = np.random.default_rng(seed)
+    n = int(gen.choice([0, 1, 2, 3, 12, 60, 150]))
+    lines = _random_lines(gen, n, np.deg2rad([0.0, 90.0, 45.0, 2.0, 178.0]))
+    obs = BevObservation(lines.endpoints.reshape(-1, 2), np.zeros(2), 0.05, np.ones((4, 4), bool), np.ones((4, 4)), lines=lines)
+    for distance in (0.5, 3.0, 50.0):  # sparse neighbours, the everyone fallback, everyone
+        a = ransac.BevSamples(obs, cfg.primitives.lines, cfg.estimator.solvers, distance)
+        b = ransac.BevSamples(obs, cfg.primitives.lines, cfg.estimator.solvers, distance, kernels="numba")
+        assert a.triplets.dtype == b.triplets.dtype and a.triplets.shape == b.triplets.shape
+        assert np.array_equal(a.triplets, b.triplets)
+        assert (a.triplet_p is None) == (b.triplet_p is None)
+        if a.triplet_p is not None:
+            assert np.array_equal(a.triplet_p, b.triplet_p)

@@ -335,7 +335,8 @@ def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
 class BevSamples:
     """Every admissible minimal sample of BEV primitives, per solver."""
 
-    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float):
+    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float,
+                 kernels: str = "numpy"):
         self.lines = deduplicate_lines(obs.lines, line_settings) if len(obs.lines) else obs.lines
         self.circles = obs.circles
         par = np.deg2rad(solvers.parallel_angle_deg)
@@ -347,6 +348,10 @@ class BevSamples:
         everyone = [np.delete(np.arange(len(self.lines)), i) for i in range(len(self.lines))]
 
         def triplets(nb):
+            if kernels == "numba":  # the same table compiled (ransac_numba; a long walk's BEV holds hundreds of lines)
+                from .ransac_numba import admissible_triplets
+
+                return admissible_triplets(nb, alpha, par)
             tri = _ordered_triplets(nb)
             if len(tri):
                 a = alpha[tri]
@@ -611,7 +616,7 @@ def localize(
     # ---- model estimation ------------------------------------------------------------
     full_cfg = _settings_of(floorplan)
     fp = floorplan_matches(floorplan, cfg.solvers)
-    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
+    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior, cfg.kernels)
     pool = solver_pool(cfg, bev, fp)
     warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
     blocks, labels = [], []
