@@ -347,16 +347,19 @@ class BevSamples:
         # within the neighbour distance, the restriction is lifted rather than giving up.
         everyone = [np.delete(np.arange(len(self.lines)), i) for i in range(len(self.lines))]
 
+        lengths = self.lines.lengths
+
         def triplets(nb):
+            """The admissible triplets and their sampling weights (the shortest line's length)."""
             if kernels == "numba":  # the same table compiled (ransac_numba; a long walk's BEV holds hundreds of lines)
                 from .ransac_numba import admissible_triplets
 
-                return admissible_triplets(nb, alpha, par)
+                return admissible_triplets(nb, alpha, par, lengths)
             tri = _ordered_triplets(nb)
             if len(tri):
                 a = alpha[tri]
                 tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
-            return tri
+            return tri, (lengths[tri].min(axis=1) if len(tri) else np.zeros(0))
 
         def pairs_of(nb):
             pairs = _ordered_pairs(nb)
@@ -365,8 +368,9 @@ class BevSamples:
             return pairs
 
         neighbours = _neighbour_lists(self.lines, neighbour_distance)
-        tri = triplets(neighbours)
-        self.triplets = tri if len(tri) else triplets(everyone)
+        self.triplets, triplet_weights = triplets(neighbours)
+        if not len(self.triplets):
+            self.triplets, triplet_weights = triplets(everyone)
         pairs = pairs_of(neighbours)
         self.pairs = pairs if len(pairs) else pairs_of(everyone)
         self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
@@ -376,8 +380,7 @@ class BevSamples:
         # Sampling weights: a line sample is as trustworthy as its shortest line (short
         # segments are often clutter, door jambs or fragments with no floorplan match), so
         # samples are drawn with probability proportional to that length.
-        lengths = self.lines.lengths
-        self.triplet_p = _probabilities(lengths[self.triplets].min(axis=1) if len(self.triplets) else np.zeros(0))
+        self.triplet_p = _probabilities(triplet_weights)
         self.pair_p = _probabilities(lengths[self.pairs].min(axis=1) if len(self.pairs) else np.zeros(0))
         self.line_circle_p = _probabilities(lengths[self.line_circle[:, 0]] if len(self.line_circle) else np.zeros(0))
 

@@ -81,11 +81,12 @@ def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.
 
 
 @njit
-def _admissible_triplets(indptr, indices, parallel):
+def _admissible_triplets(indptr, indices, parallel, lengths):
     """ransac._ordered_triplets of the CSR neighbour lists (rows (i, j, k), j != k both
     neighbours of i, j-major in list order) without those whose j and k are both parallel
     to i: the rows BevSamples keeps, in the same order. Counted first, so the table is one
-    allocation (the numpy path builds it per line and filters a copy)."""
+    allocation (the numpy path builds it per line and filters a copy). Also each row's
+    sampling weight, the shortest of its three lines' lengths (exact: a minimum)."""
     n = indptr.shape[0] - 1
     total = 0
     for i in range(n):
@@ -93,6 +94,7 @@ def _admissible_triplets(indptr, indices, parallel):
         if m >= 2:
             total += m * (m - 1)
     out = np.empty((total, 3), np.int64)
+    weight = np.empty(total, np.float64)
     t = 0
     for i in range(n):
         lo, hi = indptr[i], indptr[i + 1]
@@ -108,20 +110,22 @@ def _admissible_triplets(indptr, indices, parallel):
                 out[t, 0] = i
                 out[t, 1] = j
                 out[t, 2] = k
+                weight[t] = min(lengths[i], lengths[j], lengths[k])
                 t += 1
-    return out[:t].copy()
+    return out[:t].copy(), weight[:t].copy()
 
 
-def admissible_triplets(neighbours, alpha: np.ndarray, max_angle: float) -> np.ndarray:
-    """BevSamples' triplet table compiled: the same (T, 3) int64 rows in the same order.
+def admissible_triplets(neighbours, alpha: np.ndarray, max_angle: float, lengths: np.ndarray):
+    """BevSamples' triplet table compiled: the same (T, 3) int64 rows in the same order,
+    and their weights (lengths[rows].min(axis=1)).
     The parallel test is ransac._parallel_mod_pi's arithmetic on every (i, j) pair at once,
     alpha[i] - alpha[j] and numpy's sin on a contiguous array, as the numpy path applies it
     to the contiguous differences of its gathered triplets: the same booleans."""
     n = len(neighbours)
     if n == 0:
-        return np.zeros((0, 3), dtype=np.int64)
+        return np.zeros((0, 3), dtype=np.int64), np.zeros(0)
     parallel = np.abs(np.sin(alpha[:, None] - alpha[None, :])) < np.sin(max_angle)
     sizes = np.array([len(nb) for nb in neighbours], dtype=np.int64)
     indptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     indices = np.concatenate([np.asarray(nb, dtype=np.int64) for nb in neighbours]) if indptr[-1] else np.zeros(0, np.int64)
-    return _admissible_triplets(indptr, indices, parallel)
+    return _admissible_triplets(indptr, indices, parallel, np.ascontiguousarray(lengths, dtype=np.float64))
