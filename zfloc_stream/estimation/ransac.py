@@ -345,7 +345,8 @@ class BevSamples:
         # BEV segments are observed parts of floorplan walls, so two BEV lines can be
         # farther apart than their floorplan counterparts: when no admissible sample exists
         # within the neighbour distance, the restriction is lifted rather than giving up.
-        everyone = [np.delete(np.arange(len(self.lines)), i) for i in range(len(self.lines))]
+        def everyone():  # every other line, per line: built only when the fallback is taken
+            return [np.delete(np.arange(len(self.lines)), i) for i in range(len(self.lines))]
 
         lengths = self.lines.lengths
 
@@ -370,9 +371,9 @@ class BevSamples:
         neighbours = _neighbour_lists(self.lines, neighbour_distance)
         self.triplets, triplet_weights = triplets(neighbours)
         if not len(self.triplets):
-            self.triplets, triplet_weights = triplets(everyone)
+            self.triplets, triplet_weights = triplets(everyone())
         pairs = pairs_of(neighbours)
-        self.pairs = pairs if len(pairs) else pairs_of(everyone)
+        self.pairs = pairs if len(pairs) else pairs_of(everyone())
         self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
         if not len(self.line_circle):
             self.line_circle = _line_circle_pairs(self.lines, self.circles, np.inf, solvers.min_baseline)
