@@ -205,6 +205,12 @@ class EstimatorSettings(Section):
     # same decisions within the cross-machine tolerance (estimation/*_numba.py say which
     # kernels are bit for bit), several times faster.
     kernels: Literal["numpy", "numba"] = "numpy"
+    # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
+    # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
+    # compiled kernels only): the same bits with any count. 0 (auto): the cores this
+    # process may use (at most threads.AUTO_MAX), less one for the stream when the round
+    # runs beside it (localizer.pipeline: pipelined).
+    threads: int = Field(0, ge=0, le=256)
 
 
 class GravitySettings(Section):

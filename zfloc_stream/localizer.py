@@ -47,6 +47,7 @@ from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
 from .rng import make_rng
+from . import threads
 from .sim2 import Sim2
 from .tracking import HypothesisTracker
 
@@ -75,7 +76,10 @@ def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     """Primitives + estimation of one round: a pure function of its inputs, so it gives the
     same bits on the caller's thread, a worker thread or a worker process. Afterwards the
     round's freed temporaries go back to the OS (localizer.release_memory)."""
-    out = _run_round(floorplan, settings, job)
+    # estimator.threads' auto leaves the stream's core alone when the round runs beside it
+    beside_stream = settings.localizer.pipeline == "pipelined"
+    with threads.limit(threads.resolve(settings.estimator.threads, beside_stream=beside_stream)):
+        out = _run_round(floorplan, settings, job)
     if settings.localizer.release_memory:
         release_free_heap()
     return out

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+from .. import threads
 from ..numba_support import njit
 from . import correlative as C
 
@@ -214,10 +215,10 @@ def search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half,
     pairs = [(a, a + half_turn) for a in range(half_turn)] + [(a, -1) for a in range(2 * half_turn, n_angles)]
     M2 = M * C._mirror_phase(side, H, W) if half_turn else None
     empty = np.zeros((0, 0), np.complex64)
-    for a, b in pairs:
+
+    def search_pair(pair):
+        a, b = pair
         do_a, do_b = bool(searched[a]), b >= 0 and bool(searched[b])
-        if not do_a and not do_b:
-            continue
         if not do_a:
             a, b, do_a, do_b = b, -1, True, False
         ij = template(a)
@@ -234,4 +235,7 @@ def search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half,
                 _pair_products(spec, M, M, empty)
             fast = _peaks(spec, n_i, n_j, W, per_angle)
             found[angle] = fast if fast is not None else C._exact_peaks(spectrum, template(angle), n_i, n_j, per_angle)
+
+    # pairs are independent (each writes its own angles' slots): spread over the round's threads
+    threads.run(search_pair, [(a, b) for a, b in pairs if searched[a] or (b >= 0 and searched[b])])
     return found

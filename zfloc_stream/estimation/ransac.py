@@ -45,6 +45,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .. import threads
 from ..config import EstimatorSettings, FloorplanSettings, LineSettings, Settings, SolverSettings
 from ..errors import InputError
 from ..geometry import CircleSet, LineSet
@@ -607,7 +608,16 @@ def localize(
 
     global_search: also seed with the exhaustive correlative search (fixed or prior
     scale, estimator.correlative.enabled); a round that only follows a tracked mode
-    passes False."""
+    passes False.
+
+    Runs its independent pieces on estimator.threads threads (threads.py), unless the
+    caller set the round's thread count already (localizer.run_round)."""
+    with threads.limit(threads.resolve(settings.threads), unless_set=True):
+        return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search)
+
+
+def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: np.random.Generator, scale_prior: float,
+              warm_start: Sequence[Sim2], iterations: int | None, global_search: bool) -> LocalizationResult:
     cfg = settings
     iterations = cfg.ransac.iterations if iterations is None else int(iterations)
     _validate(obs, scale_prior, iterations)

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from .. import threads
 from ..config import RefineSettings, ScaleMode
 from ..numba_support import njit
 from .refine import refinable
@@ -38,6 +39,9 @@ from .refine import refinable
 # instructions) does not allow; the block's scratch (5 x 64 doubles) stays in L1. Measured
 # 1.5x faster per evaluation than a single loop, with the same results bit for bit.
 BLOCK = 64
+# a refinement is split over threads only in pieces of at least this many models (each
+# runs up to max_evaluations passes over the points)
+_MIN_MODELS_PER_THREAD = 2
 
 
 @njit
@@ -287,10 +291,13 @@ def refine_batch_numba(
     h, w = grid.shape
     # log s from numpy (not libm), so the starting point equals the numpy path's
     P = np.ascontiguousarray(np.column_stack([models[ok, :3], log_s[ok]]))
-    _refine_models(grid.ravel(), w, h, float(field.origin[0]), float(field.origin[1]), float(field.resolution),
-                   np.ascontiguousarray(pts), P, free_scale, float(lo), float(hi), float(settings.huber_delta),
-                   float(settings.outlier_distance), float(settings.initial_damping), float(settings.damping_factor),
-                   float(settings.tolerance), int(settings.max_evaluations))
+    args = (float(settings.huber_delta), float(settings.outlier_distance), float(settings.initial_damping),
+            float(settings.damping_factor), float(settings.tolerance), int(settings.max_evaluations))
+    flat, pts = grid.ravel(), np.ascontiguousarray(pts)
+    # models are refined one by one: ranges of them on the round's threads (threads.py)
+    threads.run(lambda r: _refine_models(flat, w, h, float(field.origin[0]), float(field.origin[1]), float(field.resolution),
+                                         pts, P[r[0]:r[1]], free_scale, float(lo), float(hi), *args),
+                threads.ranges(len(P), _MIN_MODELS_PER_THREAD))
     # the output conversion in numpy, exactly as refine_batch writes it
     refined = np.column_stack([P[:, 0], P[:, 1], (P[:, 2] + np.pi) % (2 * np.pi) - np.pi, np.exp(P[:, 3])])
     finite = np.isfinite(refined).all(axis=1)

@@ -10,8 +10,9 @@ sin/cos need not round like the C library's).
 The loops need none of the (hypotheses x points) temporaries numpy builds, so chunk_size
 (which bounds them there) has nothing to bound here. rank_coarse_to_fine's choice of the
 hypotheses to re-score (top_distinct) sorts and poses only the prefix of the coarse order
-that the greedy suppression reads: the same indices in the same order. Single-threaded; every kernel
-releases the GIL.
+that the greedy suppression reads: the same indices in the same order. Every kernel
+releases the GIL; a call over many hypotheses is split into ranges of them, one per thread
+the round was given (threads.py), each writing its own slots: the same bits.
 """
 
 from __future__ import annotations
@@ -20,10 +21,21 @@ import math
 
 import numpy as np
 
+from .. import threads
 from ..errors import InputError
 from ..numba_support import njit
 from ..ties import tie_keys
 from .scoring import DEEP_FREE, FREE, implied_poses
+
+
+# a kernel call is split over the round's threads (threads.py) only into pieces of at
+# least this many point lookups (~0.2 ms): handing a piece to a worker costs ~0.05 ms
+_MIN_LOOKUPS_PER_THREAD = 200_000
+_MIN_VIOLATION_MODELS_PER_THREAD = 64  # violation: a model reads the floorplan walls under its footprint
+
+
+def _model_ranges(n_models: int, n_points: int) -> list[tuple[int, int]]:
+    return threads.ranges(n_models, _MIN_LOOKUPS_PER_THREAD // max(1, n_points) + 1)
 
 
 @njit
@@ -232,8 +244,10 @@ class NumbaScorer:
         # of coarse_terms (products, float32 rounding) is done in the kernel
         c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
         index_type = np.uint32 if h * w <= 1 << 32 else np.uint64
-        _coarse_kernel(models, c, sn, 1.0 / scorer.resolution, float(scorer.origin[0]), float(scorer.origin[1]),
-                       px, py, scorer.coarse_field, h, w, index_type, out)
+        inv, ox, oy = 1.0 / scorer.resolution, float(scorer.origin[0]), float(scorer.origin[1])
+        threads.run(lambda r: _coarse_kernel(models[r[0]:r[1]], c[r[0]:r[1]], sn[r[0]:r[1]], inv, ox, oy, px, py,
+                                             scorer.coarse_field, h, w, index_type, out[r[0]:r[1]]),
+                    _model_ranges(len(models), len(px)))
         return out
 
     def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
@@ -248,11 +262,13 @@ class NumbaScorer:
         a = models[:, 3] * np.cos(models[:, 2])
         b = models[:, 3] * np.sin(models[:, 2])
         h, w = floorplan.shape
-        finite = _consistency_kernel(a, b, np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1]),
-                                     np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), floorplan._flat_field,
-                                     h, w, float(floorplan.origin[0]), float(floorplan.origin[1]), float(floorplan.resolution),
-                                     float(tau_c), out)
-        if not finite:
+        tx, ty = np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1])
+        px, py = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+        grid = (floorplan._flat_field, h, w, float(floorplan.origin[0]), float(floorplan.origin[1]), float(floorplan.resolution))
+        finite = threads.run(lambda r: _consistency_kernel(a[r[0]:r[1]], b[r[0]:r[1]], tx[r[0]:r[1]], ty[r[0]:r[1]], px, py, *grid,
+                                                           float(tau_c), out[r[0]:r[1]]),
+                             _model_ranges(len(models), len(p)))
+        if not all(finite):
             raise InputError("points passed to Floorplan.distance contain NaN or inf")
         return out
 
@@ -269,8 +285,14 @@ class NumbaScorer:
         c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
         k = 1.0 / (models[:, 3] * bev.resolution)
         h, w = bev.state.shape
-        _violation_kernel(np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1]), c, sn, k,
-                          c0, c1, r0, r1, empty, scorer.bucket_start, n_cols, scorer.wall_points,
-                          np.ascontiguousarray(bev.state).ravel(), h, w,
-                          float(bev.origin_cells[0]), float(bev.origin_cells[1]), per == "observed", out)
+        tx, ty = np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1])
+        state = np.ascontiguousarray(bev.state).ravel()
+        ou, ov = float(bev.origin_cells[0]), float(bev.origin_cells[1])
+
+        def piece(r):
+            i = slice(*r)
+            _violation_kernel(tx[i], ty[i], c[i], sn[i], k[i], c0[i], c1[i], r0[i], r1[i], empty[i], scorer.bucket_start, n_cols,
+                              scorer.wall_points, state, h, w, ou, ov, per == "observed", out[i])
+
+        threads.run(piece, threads.ranges(len(models), _MIN_VIOLATION_MODELS_PER_THREAD))
         return out

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import threads
 from ..config import SolverSettings
 from ..numba_support import njit
 from .ransac_numba import _cumulate, _draw_row, draw_uniforms
@@ -163,11 +164,14 @@ def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table,
 
 # draws per block of _drawn_3l: its buffers stay in the L1 cache
 _BLOCK = 512
+# drawn_3l splits its draws over the round's threads only in pieces of at least this many
+# (~1 ms)
+_MIN_DRAWS_PER_THREAD = 32_768
 
 
 @njit
-def _drawn_3l(starts, sizes, counts, uniform, p0, p1, p2, rows, bnx, bny, bd, fnx, fny, fd, table, cos_table, sin_table, n_bev,
-              limits):
+def _drawn_3l(starts, sizes, counts, uniform, j_start, j_end, b_start, left_start, p0, p1, p2, rows, bnx, bny, bd, fnx, fny, fd,
+              table, cos_table, sin_table, n_bev, limits):
     """ransac_numba._draw_rows and _solve in one loop: BEV sample b (lines p0[b], p1[b],
     p2[b]) meets counts[b] floorplan triplets, the table rows (of rows, (T, 3)) drawn as
     _draw_rows draws them. Models with theta NOT yet wrapped, and the draw each came
@@ -177,19 +181,23 @@ def _drawn_3l(starts, sizes, counts, uniform, p0, p1, p2, rows, bnx, bny, bd, fn
     table lookups, random memory accesses, independent of one another so they overlap),
     the branch-free screen (_screen_3l), then the full solve of the samples that passed
     it (which screens them again: the same function of the same values, so the same
-    outcome)."""
-    total = uniform.shape[0]
-    out = np.empty((total, 4), np.float64)
-    src = np.empty(total, np.int64)
+    outcome).
+
+    Only draws j_start to j_end - 1 are made (a piece of the whole, threads.py): the
+    first of them is one of query b_start's, which has left_start draws left there."""
+    out = np.empty((j_end - j_start, 4), np.float64)
+    src = np.empty(j_end - j_start, np.int64)
     cum = np.empty(sizes.shape[1], np.int64)
     query = np.empty(_BLOCK, np.int64)
     lines = np.empty((_BLOCK, 3), np.int64)
     passed = np.empty(_BLOCK, np.int64)
     kept = 0
-    b, n, left = -1, 0, 0  # the current query, its candidates and draws left
-    j = 0
-    while j < total:
-        m = min(_BLOCK, total - j)
+    b, n, left = b_start, 0, left_start  # the current query, its candidates and draws left
+    if left > 0:
+        n = _cumulate(sizes, b, cum)
+    j = j_start
+    while j < j_end:
+        m = min(_BLOCK, j_end - j)
         for k in range(m):
             while left == 0:  # total = sum(counts): a query with draws follows
                 b += 1
@@ -283,8 +291,19 @@ def drawn_3l(starts, sizes, fraction: float, rng: np.random.Generator, picks, ro
     if len(uniform) == 0:
         return _empty()
     table, (cos_table, sin_table) = _rotation_table(bev_angles, fp_angles, None)
-    models, source = _drawn_3l(starts, sizes, counts, uniform, *_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), *_lines(bev_lines), *_lines(fp_lines),
-                               table, cos_table, sin_table, len(bev_angles), _limits_3l(settings))
+    rest = (*_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), *_lines(bev_lines), *_lines(fp_lines),
+            table, cos_table, sin_table, len(bev_angles), _limits_3l(settings))
+    # the draws in consecutive pieces, one per thread of the round, joined in draw order;
+    # a piece starts inside the query whose draws cover its first draw
+    ends = np.cumsum(counts)
+
+    def piece(r):
+        b = int(np.searchsorted(ends, r[0], side="right"))
+        return _drawn_3l(starts, sizes, counts, uniform, r[0], r[1], b, int(ends[b] - r[0]), *rest)
+
+    parts = threads.run(piece, threads.ranges(len(uniform), _MIN_DRAWS_PER_THREAD))
+    models = np.concatenate([m for m, _ in parts])
+    source = np.concatenate([src for _, src in parts])
     return _wrapped(models, source)
 
 

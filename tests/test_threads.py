@@ -1,0 +1,125 @@
+"""estimator.threads: a round's independent pieces on several threads (zfloc_stream/threads.py)
+give the single-threaded bits, whatever the thread count."""
+
+import threading
+
+import numpy as np
+import pytest
+from test_localizer_pipeline import _bits, _run, _settings
+from test_ransac_numba import _assert_same_bits, _estimator, _scene
+
+from zfloc_stream import threads
+from zfloc_stream.errors import ConfigError
+from zfloc_stream.estimation import correlative_numba, ransac, refine_numba, scoring_numba, solvers_numba
+from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
+
+pytest.importorskip("numba")
+
+
+def test_run_keeps_the_order_and_uses_several_threads():
+    seen = set()
+
+    def piece(k):
+        seen.add(threading.get_ident())
+        assert threads.current() == 1  # a piece never asks the pool again
+        return k * k
+
+    assert threads.run(piece, list(range(50))) == [k * k for k in range(50)]  # outside a limit: serial
+    assert seen == {threading.get_ident()}
+    with threads.limit(3):
+        assert threads.current() == 3
+        assert threads.run(piece, list(range(200))) == [k * k for k in range(200)]
+    assert threads.current() == 1
+
+
+def test_a_failing_piece_raises_after_every_piece_stopped():
+    done = []
+
+    def piece(k):
+        if k == 3:
+            raise ValueError("piece 3")
+        done.append(k)
+        return k
+
+    with threads.limit(2), pytest.raises(ValueError, match="piece 3"):
+        threads.run(piece, list(range(8)))
+    assert sorted(done) == [0, 1, 2, 4, 5, 6, 7]
+
+
+def test_limit_unless_set_keeps_the_enclosing_limit():
+    with threads.limit(2):
+        with threads.limit(4, unless_set=True):
+            assert threads.current() == 2
+        with threads.limit(4):
+            assert threads.current() == 4
+    with threads.limit(4, unless_set=True):
+        assert threads.current() == 4
+
+
+def test_ranges_and_resolve():
+    with threads.limit(3):
+        assert threads.ranges(10) == [(0, 3), (3, 6), (6, 10)]
+        assert threads.ranges(10, min_size=6) == [(0, 10)]
+        assert threads.ranges(0) == [(0, 0)]
+    assert threads.ranges(10) == [(0, 10)]
+    assert threads.resolve(5) == 5
+    cores = threads.available_cores()
+    assert threads.resolve(0) == max(1, min(threads.AUTO_MAX, cores))
+    assert threads.resolve(0, beside_stream=True) == max(1, min(threads.AUTO_MAX, cores - 1))
+
+
+def test_bad_thread_count_is_a_config_error():
+    with pytest.raises(ConfigError):
+        _settings("estimator.threads=-1")
+
+
+@pytest.fixture
+def split_everything(monkeypatch):
+    """Every kernel call splits, however small (the real minima keep tests' small inputs whole)."""
+    monkeypatch.setattr(scoring_numba, "_MIN_LOOKUPS_PER_THREAD", 1)
+    monkeypatch.setattr(scoring_numba, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(refine_numba, "_MIN_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(solvers_numba, "_MIN_DRAWS_PER_THREAD", 1)
+    split = []
+    run = threads.run
+
+    def spy(fn, pieces):
+        if threads.current() > 1 and len(pieces) > 1:
+            split.append(fn.__name__)
+        return run(fn, pieces)
+
+    for module in (scoring_numba, refine_numba, solvers_numba, correlative_numba):
+        monkeypatch.setattr(module.threads, "run", spy)
+    return split
+
+
+@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("mode", ["free", "prior"])
+def test_3l_draws_in_pieces_are_the_whole(split_everything, seed, mode):
+    bev, fp = _scene(seed)
+    cfg = _estimator(mode, "numba", 0.5)
+    a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+    whole = ransac._models_3l(bev, fp, 700, cfg, a)
+    with threads.limit(7):  # pieces start in the middle of a query's draws
+        pieces = ransac._models_3l(bev, fp, 700, cfg, b)
+    _assert_same_bits(pieces, whole)
+    assert split_everything and a.random() == b.random()
+
+
+@pytest.mark.parametrize("case", ["laser", "camera"])
+def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, case):
+    """Every split kernel (correlative angles, 3L draws, coarse / full scores, violation,
+    refinement) runs in pieces on 3 threads: every estimate equals the 1-thread run's."""
+    if case == "laser":
+        scene = build_scene("office", seed=1)
+        frames = list(simulate_laser(scene, LaserSimSettings(), seed=1, n_frames=30).frames)
+    else:
+        scene = build_scene("apartment", seed=2)
+        frames = list(simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=30))
+    one = _run(scene.floorplan, frames, _settings("estimator.kernels=numba", "estimator.threads=1"))
+    assert not split_everything
+    three = _run(scene.floorplan, frames, _settings("estimator.kernels=numba", "estimator.threads=3"))
+    assert [_bits(e) for e in three] == [_bits(e) for e in one]
+    assert one[-1].pose is not None
+    wanted = {"piece", "search_pair", "<lambda>"}
+    assert wanted <= set(split_everything)
