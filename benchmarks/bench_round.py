@@ -71,6 +71,22 @@ command alternated twice each, load average 0.4-0.65 (p99 of each run, ms):
 Pipelined pushes cost fusion (4-6 ms median) whatever the round costs; their p99 sits at
 8-13 ms either way, so the kernels change the inline push, not the pipelined one.
 
+With the round's threads (`estimator.threads`, auto: a pipelined round keeps to one core of
+the two, an inline one takes both), `--quick --skip-stages --latency-frames 60 --rate 10
+--process --set estimator.kernels=numba`, load average 0.9, p99 (max) in ms, auto and then
+`--set estimator.threads=2` (the pipelined round on both cores):
+
+                                  auto          threads=2
+    labels      pipelined thread   8.7 (8.9)     8.8 (9.6)
+    labels      pipelined process  8.7 (8.8)     9.3 (10.7)
+    geometric   pipelined thread  11.6 (11.7)   15.1 (20.3)
+    geometric   pipelined process 13.4 (19.7)   10.3 (12.3)
+    (inline: labels 118 / 117 ms p99, the first round loading the kernels; geometric 31.6 /
+    30.1 ms)
+
+A round on both cores slowed the stream's geometric pushes in one run of two, hence auto
+leaves the stream its core.
+
 At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
 pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
 or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
