@@ -5,6 +5,7 @@ import threading
 
 import numpy as np
 import pytest
+from test_bev import _assert_same_observation
 from test_localizer_pipeline import _bits, _run, _settings
 from test_ransac_numba import _assert_same_bits, _estimator, _scene
 
@@ -123,3 +124,31 @@ def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, c
     assert one[-1].pose is not None
     wanted = {"piece", "search_pair", "<lambda>"}
     assert wanted <= set(split_everything)
+
+
+def test_observation_jobs_on_threads_give_the_serial_observation():
+    """The BEV observation's clustering, line extraction and clearance run side by side;
+    the circle fits draw after the lines: the same observation (a pillar included)."""
+    from zfloc_stream.config import load_settings
+    from zfloc_stream.frontend.bev import BevSnapshot, RollingBEV
+    from zfloc_stream.rng import make_rng
+
+    scene = build_scene("office", seed=0)
+    bev = RollingBEV(load_settings(overrides=["estimator.kernels=numba"]))
+    for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:  # passes a pillar
+        bev.add(frame)
+    snapshot = bev.snapshot()
+    serial = snapshot.observation(make_rng(0, "obs"))
+    with threads.limit(3):
+        side_by_side = snapshot.observation(make_rng(0, "obs"))
+    assert len(serial.circles) >= 1 and len(serial.lines) > 5
+    for name in ("wall_points", "free", "clearance"):
+        assert np.array_equal(getattr(side_by_side, name), getattr(serial, name))
+    for a, b in ((side_by_side.lines, serial.lines), (side_by_side.circles, serial.circles)):
+        for x, y in zip(a.__dict__.values(), b.__dict__.values()):
+            assert np.array_equal(x, y)
+    # and the numpy path's (lines, then circles, from one random stream)
+    s = snapshot
+    numpy_snapshot = BevSnapshot(s.logodds, s.wall, s.hits, s.seen, s.ix0, s.iy0, s.trajectory,
+                                 load_settings(overrides=["estimator.kernels=numpy"]), s.stamp)
+    _assert_same_observation(numpy_snapshot.observation(make_rng(0, "obs")), serial)

@@ -27,6 +27,7 @@ pillar: the same empty sets). The tests allow 1e-9 m.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import sklearn
@@ -460,18 +461,31 @@ def _clusters(sub, labels, group, n_groups, sizes, draws, iterations, inlier, mi
     return centres[:found].copy(), radii[:found].copy()
 
 
-def extract_circles(pts: np.ndarray, settings, rng: np.random.Generator) -> CircleSet:
-    """primitives.extract_circles(kernels="numba") on checked points pts (N, 2): the same
-    circles in the same order from the same random numbers (see the module docstring)."""
+@dataclass(frozen=True)
+class CircleClusters:
+    """What extract_circles finds before it takes a random number: the candidate points,
+    their HDBSCAN labels and groups, and each cluster's RANSAC work size (-1: too wide)."""
+
+    sub: np.ndarray
+    labels: np.ndarray
+    group: np.ndarray
+    n_groups: int
+    sizes: np.ndarray
+
+
+def circle_clusters(pts: np.ndarray, settings) -> CircleClusters | None:
+    """The first, deterministic half of extract_circles (group filter, HDBSCAN): None when
+    no cluster is left. It takes no random numbers, so it can run beside the line
+    extraction, whose draws come first (frontend/bev.py)."""
     s = settings
     if len(pts) < s.min_cluster_size:
-        return CircleSet.empty()
+        return None
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     max_width = 2 * s.max_radius + 2 * s.inlier_distance  # the numpy path's expression
     pairs = cKDTree(pts).query_pairs(s.group_link_distance, output_type="ndarray").astype(np.int64)
     keep, group = _groups(pts, pairs.reshape(-1, 2), max_width, s.min_cluster_size)
     if len(keep) < s.min_cluster_size:
-        return CircleSet.empty()
+        return None
     sub = pts[keep]
     # sklearn's own switch (thread-local) skips re-validating parameters the settings
     # already validated: ~0.3 ms a call, the same labels
@@ -484,18 +498,33 @@ def extract_circles(pts: np.ndarray, settings, rng: np.random.Generator) -> Circ
         ).fit_predict(sub).astype(np.int64)
     n_clusters = int(labels.max()) + 1
     if n_clusters <= 0:
-        return CircleSet.empty()
+        return None
     n_groups = int(group.max()) + 1
     sizes = _work_sizes(sub, labels, group, n_groups, n_clusters, max_width)
+    return CircleClusters(sub, labels, group, n_groups, sizes)
+
+
+def fit_circles(clusters: CircleClusters | None, settings, rng: np.random.Generator) -> CircleSet:
+    """The second half of extract_circles: each cluster's RANSAC fit and tests."""
+    s = settings
+    if clusters is None:
+        return CircleSet.empty()
     # the numpy path's draws: one block per cluster that is not too wide, in cluster order
-    blocks = [rng.integers(0, m, size=(s.ransac_iterations, 3)) for m in sizes.tolist() if m >= 0]
+    blocks = [rng.integers(0, m, size=(s.ransac_iterations, 3)) for m in clusters.sizes.tolist() if m >= 0]
     if not blocks:
         return CircleSet.empty()
     draws = np.concatenate(blocks).astype(np.int64)
     centres, radii = _clusters(
-        sub, labels, group, n_groups, sizes, draws, s.ransac_iterations, s.inlier_distance, s.min_radius, s.max_radius,
-        s.refit_rounds, s.refit_iterations, s.min_cluster_size, s.min_inlier_ratio,
-        float(np.deg2rad(s.max_gap_deg)), float(np.deg2rad(s.min_coverage_deg)), float(np.deg2rad(s.min_span_deg)))
+        clusters.sub, clusters.labels, clusters.group, clusters.n_groups, clusters.sizes, draws, s.ransac_iterations,
+        s.inlier_distance, s.min_radius, s.max_radius, s.refit_rounds, s.refit_iterations, s.min_cluster_size,
+        s.min_inlier_ratio, float(np.deg2rad(s.max_gap_deg)), float(np.deg2rad(s.min_coverage_deg)),
+        float(np.deg2rad(s.min_span_deg)))
     if len(radii) == 0:
         return CircleSet.empty()
     return CircleSet(centres, radii)
+
+
+def extract_circles(pts: np.ndarray, settings, rng: np.random.Generator) -> CircleSet:
+    """primitives.extract_circles(kernels="numba") on checked points pts (N, 2): the same
+    circles in the same order from the same random numbers (see the module docstring)."""
+    return fit_circles(circle_clusters(pts, settings), settings, rng)

@@ -31,6 +31,7 @@ from collections import deque
 import cv2
 import numpy as np
 
+from .. import threads
 from ..config import Settings
 from ..errors import ConfigError, FrameError, InputError
 from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
@@ -471,6 +472,9 @@ class BevSnapshot:
     def _with_primitives(self, points, origin, free, clearance, rng: np.random.Generator) -> BevObservation:
         """The observation of the cropped grids, with the lines and circles of its wall points."""
         lines, circles = _extract_primitives(points, self.settings, rng)
+        return self._observation(points, origin, free, clearance, lines, circles)
+
+    def _observation(self, points, origin, free, clearance, lines, circles) -> BevObservation:
         return BevObservation(
             wall_points=points,
             origin=origin,
@@ -504,9 +508,26 @@ class BevSnapshot:
         free, not_occupied, points = bev_numba.crop_masks(
             *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
             use_recent, oldest, origin[0], origin[1], b.resolution)
-        distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        clearance = bev_numba.clearance(distance, free, b.resolution)
-        return self._with_primitives(points, origin, free, clearance, rng)
+        from ..circles_numba import circle_clusters, fit_circles
+        from ..primitives import as_points, extract_lines
+
+        prim = self.settings.primitives
+
+        def clearance():
+            distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+            return bev_numba.clearance(distance, free, b.resolution)
+
+        # Three independent jobs on the round's threads (threads.py), longest first: the
+        # circles' clustering takes no random numbers, so it runs beside the line
+        # extraction, whose draws come first as in _extract_primitives; the circle fits
+        # draw after it. The same observation as one thread gives.
+        clusters, lines, clearance = threads.run(lambda job: job(), [
+            lambda: circle_clusters(as_points(points), prim.circles),
+            lambda: extract_lines(points, prim.lines, rng, kernels="numba"),
+            clearance,
+        ])
+        circles = fit_circles(clusters, prim.circles, rng)
+        return self._observation(points, origin, free, clearance, lines, circles)
 
 
 
