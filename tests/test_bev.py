@@ -194,6 +194,12 @@ def test_memory_frames_forgets_cells_no_recent_frame_touched():
     assert (forgotten.wall_points[:, 0] > 7.9).sum() == (kept.wall_points[:, 0] > 7.9).sum()  # room B untouched
     assert not forgotten.free_at(np.array([[3.0, 3.0]])).any()  # room A's free space is unknown again
     assert kept.free_at(np.array([[3.0, 3.0]])).all()
+    # a run no longer than the memory (10 frames) is the run without one, bit for bit:
+    # the default (300) leaves every run of up to 300 frames as it was
+    full = walk(10)
+    for name in ("wall_points", "free", "clearance"):
+        assert np.array_equal(getattr(full, name), getattr(kept, name))
+    assert np.array_equal(full.lines.endpoints, kept.lines.endpoints)
 
 
 def test_scan_matching_keeps_the_map_sharp_under_drifting_odometry():
