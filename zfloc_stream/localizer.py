@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import threads
 from .backbones.perception import Perception, needs_backbones
 from .config import Settings
 from .errors import ZflocError
@@ -47,7 +48,6 @@ from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
 from .rng import make_rng
-from . import threads
 from .sim2 import Sim2
 from .tracking import HypothesisTracker
 

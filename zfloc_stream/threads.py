@@ -114,12 +114,11 @@ def run(fn: Callable[[T], R], pieces: Sequence[T]) -> list[R]:
     taken = itertools.count()  # next() on it is atomic: each piece is taken once
 
     def work() -> None:
-        for k in iter(lambda: next(taken), None):
-            if k >= len(pieces):
-                return
+        while (k := next(taken)) < len(pieces):
             results[k] = fn(pieces[k])
 
-    futures = [_pool(threads - 1).submit(work) for _ in range(threads - 1)]
+    pool = _pool(threads - 1)
+    futures = [pool.submit(work) for _ in range(threads - 1)]
     was_worker = getattr(_IN_WORKER, "active", False)
     _IN_WORKER.active = True  # a piece run here does not ask the pool again
     try:

@@ -291,13 +291,16 @@ def refine_batch_numba(
     h, w = grid.shape
     # log s from numpy (not libm), so the starting point equals the numpy path's
     P = np.ascontiguousarray(np.column_stack([models[ok, :3], log_s[ok]]))
-    args = (float(settings.huber_delta), float(settings.outlier_distance), float(settings.initial_damping),
-            float(settings.damping_factor), float(settings.tolerance), int(settings.max_evaluations))
-    flat, pts = grid.ravel(), np.ascontiguousarray(pts)
-    # models are refined one by one: ranges of them on the round's threads (threads.py)
-    threads.run(lambda r: _refine_models(flat, w, h, float(field.origin[0]), float(field.origin[1]), float(field.resolution),
-                                         pts, P[r[0]:r[1]], free_scale, float(lo), float(hi), *args),
-                threads.ranges(len(P), _MIN_MODELS_PER_THREAD))
+    field_args = (grid.ravel(), w, h, float(field.origin[0]), float(field.origin[1]), float(field.resolution),
+                  np.ascontiguousarray(pts))
+    lm_args = (free_scale, float(lo), float(hi), float(settings.huber_delta), float(settings.outlier_distance),
+               float(settings.initial_damping), float(settings.damping_factor), float(settings.tolerance),
+               int(settings.max_evaluations))
+
+    def piece(r):  # models are refined one by one: ranges of them on the round's threads (threads.py)
+        _refine_models(*field_args, P[slice(*r)], *lm_args)
+
+    threads.run(piece, threads.ranges(len(P), _MIN_MODELS_PER_THREAD))
     # the output conversion in numpy, exactly as refine_batch writes it
     refined = np.column_stack([P[:, 0], P[:, 1], (P[:, 2] + np.pi) % (2 * np.pi) - np.pi, np.exp(P[:, 3])])
     finite = np.isfinite(refined).all(axis=1)

@@ -245,9 +245,12 @@ class NumbaScorer:
         c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
         index_type = np.uint32 if h * w <= 1 << 32 else np.uint64
         inv, ox, oy = 1.0 / scorer.resolution, float(scorer.origin[0]), float(scorer.origin[1])
-        threads.run(lambda r: _coarse_kernel(models[r[0]:r[1]], c[r[0]:r[1]], sn[r[0]:r[1]], inv, ox, oy, px, py,
-                                             scorer.coarse_field, h, w, index_type, out[r[0]:r[1]]),
-                    _model_ranges(len(models), len(px)))
+
+        def piece(r):
+            i = slice(*r)
+            _coarse_kernel(models[i], c[i], sn[i], inv, ox, oy, px, py, scorer.coarse_field, h, w, index_type, out[i])
+
+        threads.run(piece, _model_ranges(len(models), len(px)))
         return out
 
     def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
@@ -265,10 +268,12 @@ class NumbaScorer:
         tx, ty = np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1])
         px, py = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
         grid = (floorplan._flat_field, h, w, float(floorplan.origin[0]), float(floorplan.origin[1]), float(floorplan.resolution))
-        finite = threads.run(lambda r: _consistency_kernel(a[r[0]:r[1]], b[r[0]:r[1]], tx[r[0]:r[1]], ty[r[0]:r[1]], px, py, *grid,
-                                                           float(tau_c), out[r[0]:r[1]]),
-                             _model_ranges(len(models), len(p)))
-        if not all(finite):
+
+        def piece(r):
+            i = slice(*r)
+            return _consistency_kernel(a[i], b[i], tx[i], ty[i], px, py, *grid, float(tau_c), out[i])
+
+        if not all(threads.run(piece, _model_ranges(len(models), len(p)))):
             raise InputError("points passed to Floorplan.distance contain NaN or inf")
         return out
 

@@ -513,7 +513,7 @@ class BevSnapshot:
 
         prim = self.settings.primitives
 
-        def clearance():
+        def free_clearance():
             distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
             return bev_numba.clearance(distance, free, b.resolution)
 
@@ -524,7 +524,7 @@ class BevSnapshot:
         clusters, lines, clearance = threads.run(lambda job: job(), [
             lambda: circle_clusters(as_points(points), prim.circles),
             lambda: extract_lines(points, prim.lines, rng, kernels="numba"),
-            clearance,
+            free_clearance,
         ])
         circles = fit_circles(clusters, prim.circles, rng)
         return self._observation(points, origin, free, clearance, lines, circles)
