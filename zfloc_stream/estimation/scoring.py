@@ -397,15 +397,18 @@ class BevView:
         disc = ((xx * xx + yy * yy) * obs.resolution**2 <= tau_v * tau_v).astype(np.uint8)
         inner = cv2.erode(free.astype(np.uint8), disc, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
         deep = inner & (np.asarray(obs.clearance) > tau_v)
-        state = (free.astype(np.int8) + deep).astype(np.int8)
+        state = free.astype(np.int8)
+        state += deep  # FREE + 1 = DEEP_FREE where deep
         cells = np.floor((np.asarray(obs.wall_points) - obs.origin) / obs.resolution).astype(np.int64)
         h, w = state.shape
         ok = (cells[:, 0] >= 0) & (cells[:, 0] < w) & (cells[:, 1] >= 0) & (cells[:, 1] < h)
         state[cells[ok, 1], cells[ok, 0]] = WALL
-        rows, cols = np.nonzero(free)
+        # the free cells' bounding box from per-row / per-column flags: the same box as
+        # np.nonzero's indices give, without listing every free cell (~10x cheaper)
+        rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
         if len(rows):
-            lo = obs.origin + obs.resolution * np.array([cols.min(), rows.min()])
-            hi = obs.origin + obs.resolution * np.array([cols.max() + 1, rows.max() + 1])
+            lo = obs.origin + obs.resolution * np.array([cols[0], rows[0]])
+            hi = obs.origin + obs.resolution * np.array([cols[-1] + 1, rows[-1] + 1])
             centre, radius = 0.5 * (lo + hi), float(0.5 * np.linalg.norm(hi - lo) + obs.resolution)
         else:
             centre, radius = np.zeros(2), 0.0
