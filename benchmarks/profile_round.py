@@ -5,13 +5,17 @@ them) and the camera session intel-camera-30 (scale_mode prior, and free). Each 
 a fresh Localizer twice over the same frames: the first pass fills the per-floorplan
 caches (its first round is reported as "cold"), the second is measured (caches warm).
 Per round stage: median / p95 / max in ms; "round" is primitives + model estimation +
-scoring + refinement + tracking.
+scoring + refinement + tracking. Each case also splits its rounds into global ones (no
+mode confidently tracked: the full search, correlative seeding included) and tracked ones
+(estimator.ransac.tracking_iterations, no global search); the laser-*-300 cases are longer
+stretches (scans 100-400) where most rounds are tracked.
 
     python benchmarks/profile_round.py                      # all cases, stage table
     python benchmarks/profile_round.py --cases camera-prior --profile 25
     python benchmarks/profile_round.py --set estimator.scoring.backend=torch
     python benchmarks/profile_round.py --dump out.json      # per-frame status + pose, to
     python benchmarks/profile_round.py --compare a.json b.json   # compare two code versions
+    python benchmarks/profile_round.py --cases laser-aces-300,laser-fhw-300,laser-intel-300
 """
 
 from __future__ import annotations
@@ -33,7 +37,9 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking")
 LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35),
          # optional (not in the default run)
-         "laser-intel": ("intel", 400, 50), "laser-belgioioso": ("belgioioso", 150, 35), "laser-orebro": ("orebro", 100, 35)}
+         "laser-intel": ("intel", 400, 50), "laser-belgioioso": ("belgioioso", 150, 35), "laser-orebro": ("orebro", 100, 35),
+         # longer stretches (scans 100-400), where most rounds follow a tracked mode
+         **{f"laser-{log}-300": (log, 100, 300) for log in ("aces", "fhw", "intel")}}
 CAMERA = {"camera-prior": ("intel-camera-30", "prior"), "camera-free": ("intel-camera-30", "free")}
 # the other shared camera sessions (not in the default run: bigger maps, 50 frames each)
 CAMERA.update({f"camera-{b}-{m}": (f"{b}-camera-50", m) for b in ("aces", "belgioioso", "fhw") for m in ("prior", "free")})
@@ -80,9 +86,16 @@ def build_case(name: str, prefix: str = "zfloc_stream", overrides: tuple[str, ..
     return Floorplan.load(folder / "map.yaml", settings=settings), frames, settings
 
 
-def run(floorplan, frames, settings):
+def run(floorplan, frames, settings, kinds: list | None = None):
+    """Estimates of a fresh Localizer pushed every frame; kinds (when given) gets, per
+    round, "tracked" (it followed a tracked mode) or "global" (it searched globally)."""
     loc = Localizer(floorplan, settings)
-    return [loc.push(f) for f in frames]
+    out = []
+    for f in frames:
+        out.append(loc.push(f))
+        if kinds is not None and "primitives" in out[-1].timings:
+            kinds.append("tracked" if loc.last_round.tracked else "global")
+    return out
 
 
 def side_by_side(name: str, reference: str, passes: int) -> None:
@@ -130,11 +143,15 @@ def record(estimates) -> list[dict]:
              "skipped": e.skipped} for e in estimates]
 
 
-def summary(name: str, warm: list[dict], cold_first: float) -> str:
+def summary(name: str, warm: list[dict], cold_first: float, kinds: list[str]) -> str:
     lines = [f"{name}: {len(warm)} rounds, cold first round {cold_first:.0f} ms"]
     for k in (*STAGES, "round"):
         v = np.array([r[k] for r in warm])
         lines.append(f"  {k:17s} median {np.median(v):7.1f}  p95 {np.percentile(v, 95):7.1f}  max {v.max():7.1f}")
+    for kind in ("global", "tracked"):  # a tracked round skips the global search
+        v = np.array([r["round"] for r, q in zip(warm, kinds) if q == kind])
+        if len(v):
+            lines.append(f"  {kind + ' rounds':17s} {len(v):4d}, round median {np.median(v):7.1f}")
     return "\n".join(lines)
 
 
@@ -196,14 +213,15 @@ def main(argv=None) -> int:
         if profiler:
             profiler.enable()
         t0 = time.perf_counter()
-        warm = run(floorplan, frames, settings)
+        kinds: list[str] = []
+        warm = run(floorplan, frames, settings, kinds)
         seconds = time.perf_counter() - t0
         warm_rounds = rounds(warm)
         for _ in range(args.repeat - 1):
             warm_rounds = [{k: min(r[k], q[k]) for k in r} for r, q in zip(warm_rounds, rounds(run(floorplan, frames, settings)))]
         if profiler:
             profiler.disable()
-        print(summary(name, warm_rounds, cold_rounds[0]["round"] if cold_rounds else float("nan")) + f"\n  whole pass {seconds:.2f} s")
+        print(summary(name, warm_rounds, cold_rounds[0]["round"] if cold_rounds else float("nan"), kinds) + f"\n  whole pass {seconds:.2f} s")
         if profiler:
             pstats.Stats(profiler).sort_stats(os.environ.get("SORT", "tottime")).print_stats(args.profile)
         if name in LASER or CAMERA[name][1] == "prior":

@@ -70,6 +70,7 @@ class RoundOutcome:
     skipped: str | None = None  # why the round did not run (Estimate.round_skipped of its join frame)
     timings: dict[str, float] = field(default_factory=dict)  # wall seconds per stage
     cpu_timings: dict[str, float] = field(default_factory=dict)  # CPU seconds per stage (the thread that ran it)
+    tracked: bool = False  # the round followed a confidently tracked mode (no global search)
 
 
 def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
@@ -87,7 +88,7 @@ def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
 
 def _run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     cfg = settings
-    out = RoundOutcome(job.index, None, None)
+    out = RoundOutcome(job.index, None, None, tracked=job.tracked)
     t0, c0 = time.perf_counter(), time.thread_time()
     try:
         obs = None if job.snapshot is None else job.snapshot.observation(make_rng(cfg.seed, "primitives", job.index))
