@@ -46,6 +46,25 @@ def test_every_frame_gets_a_pose_once_initialized():
     assert err < 0.5
 
 
+def test_a_round_says_whether_it_searched_globally(monkeypatch):
+    """RoundOutcome.tracked: True exactly for the rounds that followed a tracked mode and
+    so skipped the global (correlative) search."""
+    from zfloc_stream.estimation import ransac
+
+    searches = []
+    seeds = ransac._correlative_seeds
+    monkeypatch.setattr(ransac, "_correlative_seeds", lambda *a: searches.append(1) or seeds(*a))
+    scene = build_scene("apartment", seed=0)
+    seq = simulate(scene, SimSettings(), seed=0, n_frames=40)
+    loc = Localizer(scene.floorplan, Settings())
+    kinds = []
+    for f in seq:
+        if "primitives" in loc.push(f).timings and loc.last_round.result is not None:  # a round ran
+            kinds.append(loc.last_round.tracked)
+    assert kinds[0] is False and True in kinds  # the first round searches, later ones follow
+    assert len(searches) == kinds.count(False)
+
+
 def _mirror_pose(pose, centre):
     """The symmetric scene's main part is point-symmetric about its centre."""
     return np.array([2 * centre[0] - pose[0], 2 * centre[1] - pose[1], pose[2] + np.pi])
