@@ -86,6 +86,12 @@ def build_case(name: str, prefix: str = "zfloc_stream", overrides: tuple[str, ..
     return Floorplan.load(folder / "map.yaml", settings=settings), frames, settings
 
 
+def landed(estimate) -> bool:
+    """Whether a round landed with this push (its stage timings are there): the
+    one test for both rounds() and run()'s kinds, so the two lists line up."""
+    return "primitives" in estimate.timings
+
+
 def run(floorplan, frames, settings, kinds: list | None = None):
     """Estimates of a fresh Localizer pushed every frame; kinds (when given) gets, per
     round, "tracked" (it followed a tracked mode) or "global" (it searched globally)."""
@@ -93,7 +99,7 @@ def run(floorplan, frames, settings, kinds: list | None = None):
     out = []
     for f in frames:
         out.append(loc.push(f))
-        if kinds is not None and "primitives" in out[-1].timings:
+        if kinds is not None and landed(out[-1]):
             kinds.append("tracked" if loc.last_round.tracked else "global")
     return out
 
@@ -130,7 +136,7 @@ def side_by_side(name: str, reference: str, passes: int) -> None:
 def rounds(estimates) -> list[dict]:
     out = []
     for e in estimates:
-        if "primitives" in e.timings:
+        if landed(e):
             t = {k: 1000 * e.timings.get(k, 0.0) for k in STAGES}
             t["round"] = sum(t.values())
             out.append(t)
