@@ -192,6 +192,9 @@ def main(argv=None) -> int:
     parser.add_argument("--set", action="append", default=[], help="dotted.key=value for every case (e.g. estimator.scoring.backend=torch)")
     parser.add_argument("--against", type=Path, metavar="CHECKOUT", help="run a reference checkout's code side by side (A/B)")
     args = parser.parse_args(argv)
+    unknown = [c for c in args.cases.split(",") if c not in LASER and c not in CAMERA]
+    if unknown and not args.compare:
+        parser.error(f"--cases: unknown case(s) {', '.join(unknown)}; known: {', '.join([*LASER, *CAMERA])}")
     if args.compare:
         return compare(*args.compare)
     if args.against:
