@@ -105,6 +105,23 @@ def _distance_field(occupied: np.ndarray, resolution: float) -> np.ndarray:
     return np.sqrt(squared) * resolution
 
 
+def blob_spans(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(labels, span): 8-connected blobs of occupied cells (labels 1..count, 0 = free) and
+    each label's bounding-box side in cells (span[0] = 0). All blobs at once: a cluttered
+    map has ~10^5 of them, too many for a loop."""
+    labels, count = ndimage.label(occupied, structure=np.ones((3, 3), dtype=bool))
+    span = np.zeros(count + 1, dtype=np.int64)
+    if count:
+        rows, cols = np.nonzero(occupied)
+        blob_of = labels[rows, cols]
+        order = np.argsort(blob_of, kind="stable")
+        blob_of, rows, cols = blob_of[order], rows[order], cols[order]
+        first = np.flatnonzero(np.r_[True, blob_of[1:] != blob_of[:-1]])
+        span[blob_of[first]] = np.maximum(np.maximum.reduceat(rows, first) - np.minimum.reduceat(rows, first),
+                                          np.maximum.reduceat(cols, first) - np.minimum.reduceat(cols, first)) + 1
+    return labels, span
+
+
 class Floorplan:
     """Walls of one building in metres; build with from_occupancy / load / from_gibson_map."""
 
@@ -314,20 +331,11 @@ class Floorplan:
     def circles(self) -> CircleSet:
         cfg = self.settings
         # Only isolated wall blobs (no wider than a pillar) can be pillars in a floorplan.
-        labels, count = ndimage.label(self.occupied, structure=np.ones((3, 3), dtype=bool))
-        if count == 0:
+        labels, span = blob_spans(self.occupied)
+        if len(span) == 1:
             return CircleSet.empty()
-        limit = 2 * cfg.primitives.circles.max_radius / self.resolution + 2
-        # each blob's bounding box at once (a cluttered map has ~10^5 blobs: no loop over them)
-        rows, cols = np.nonzero(self.occupied)
-        blob_of = labels[rows, cols]
-        order = np.argsort(blob_of, kind="stable")
-        blob_of, rows, cols = blob_of[order], rows[order], cols[order]
-        first = np.flatnonzero(np.r_[True, blob_of[1:] != blob_of[:-1]])
-        span = np.maximum(np.maximum.reduceat(rows, first) - np.minimum.reduceat(rows, first),
-                          np.maximum.reduceat(cols, first) - np.minimum.reduceat(cols, first)) + 1
-        small = np.zeros(count + 1, dtype=bool)
-        small[blob_of[first]] = span <= limit
+        small = span <= 2 * cfg.primitives.circles.max_radius / self.resolution + 2
+        small[0] = False
         rows, cols = self.world_to_cell(self.face_points)
         blob = small[labels[rows, cols]]
         if not blob.any():
