@@ -30,6 +30,8 @@ spread evenly along the log (they may overlap on short logs). Each window:
     python benchmarks/eval_real.py --no-reference --set tracking.weight_gain=10
     python benchmarks/eval_real.py --camera --windows 3           # camera rows too
     python benchmarks/eval_real.py --drift-free --logs belgioioso,orebro   # what the maps allow
+    python benchmarks/eval_real.py --plan-style --camera --windows 2   # against the maps drawn as plans
+    python benchmarks/eval_real.py --plan-style two-face                # plans with both faces of each wall
 """
 
 from __future__ import annotations
@@ -37,9 +39,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +57,8 @@ from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors
+from zfloc_stream.plan_drawing import draw_plan, two_faces, write_plan_dxf
+from zfloc_stream.vector_floorplan import load_vector_floorplan
 from zfloc_stream.sim2 import Sim2
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
@@ -173,9 +179,10 @@ class _Posed:
 
 
 def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool, camera: bool = False,
-               localize: bool = True) -> dict:
+               localize: bool = True, plan_style: str | None = None) -> dict:
     """One window's row. localize=False: the laser reference alone (it does not depend on
-    the localizer, so --reference-cache keeps it across runs)."""
+    the localizer, so --reference-cache keeps it across runs). plan_style: localize (and
+    search) against the held-out map redrawn as a plan (plan_window)."""
     path = DATA / f"{log}-corrected.log.gz"
     stop = start + length
     row = {"log": log, "start": start, "length": length, "seed": seed, "sensor": "camera" if camera else "laser"}
@@ -185,6 +192,9 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         floorplan = seq.floorplan_for(start, stop)
         truth = seq.ground_truth[start:stop]
         frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames
+        if plan_style:
+            row.update(plan_window(floorplan, frames, settings, true_hits(seq.frames(start, stop))))
+            floorplan = plan_of(floorplan, settings, plan_style)
         result, localizer = localize_frames(floorplan, frames, settings)
         row.update(result, coverage=map_coverage(floorplan, true_hits(seq.frames(start, stop))))
         if reference:
@@ -197,6 +207,9 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
                 row.update(reference_row(floorplan, obs.wall_points, posed, lambda T: np.arctan2(T[1, 0], T[0, 0])))
         return row
     settings, floorplan, frames = laser_window(log, start, length, overrides, seed)
+    if plan_style:
+        row.update(plan_window(floorplan, frames, settings, true_hits(frames)))
+        floorplan = plan_of(floorplan, settings, plan_style)
     row["coverage"] = map_coverage(floorplan, true_hits(frames))
     if localize:
         result, _ = localize_frames(floorplan, frames, settings)
@@ -206,6 +219,71 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         posed = [_Posed(f.T_odom_sensor, f.ground_truth) for f in frames]
         row.update(reference_row(floorplan, points, posed, lambda T: np.arctan2(T[1, 0], T[0, 0])))
     return row
+
+
+# --- plan style: the held-out map redrawn as an architect's plan (issue 30) ---------------
+PLAN_STYLES = ("one-face", "two-face")
+PLAN_WALL_THICKNESS = 0.2  # m, two-face plans: each wall drawn as its faces this far apart
+PLAN_COVERAGE = 0.7  # windows whose plan covers at least this share of their hits
+
+
+def plan_of(floorplan, settings, style: str):
+    """The held-out map redrawn as a plan (zfloc_stream.plan_drawing), written as a DXF in
+    metres and loaded through the vector path, as a user's `run --floorplan plan.dxf`."""
+    segments = draw_plan(floorplan)
+    if style == "two-face":
+        segments = two_faces(segments, PLAN_WALL_THICKNESS)
+    with tempfile.TemporaryDirectory() as tmp:
+        return load_vector_floorplan(write_plan_dxf(segments, Path(tmp) / f"plan-{style}.dxf"), settings)
+
+
+def plan_window(raster, frames, settings, hits: np.ndarray) -> dict:
+    """What a plan row is compared with: the same window localized against the raster
+    (held-out) map it was drawn from, and that map's coverage."""
+    result, _ = localize_frames(raster, frames, settings)
+    return {"raster_success": result["success"], "raster_final_error": result["final_error"],
+            "map_coverage": map_coverage(raster, hits)}
+
+
+def plan_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
+    """Per sensor: SR on the plan (ours, the reference on the same plan rasterised) and on
+    the raster map (ours, the same windows), by length; then split by plan coverage."""
+    out = []
+    for sensor in dict.fromkeys(r["sensor"] for r in rows):
+        mine = [r for r in rows if r["sensor"] == sensor]
+        by_len = {L: [r for r in mine if r["length"] == L] for L in lengths}
+        lines = [f"### {sensor}, {mine[0]['plan_style']} plans\n", "| method | " + " | ".join(f"#{L}" for L in lengths) + " | all |",
+                 "|---" * (len(lengths) + 2) + "|"]
+        methods = [("zfloc-stream on the plan", "success")] + ([("exact search (batch) on the plan", "ref_success")] if reference else [])
+        methods.append(("zfloc-stream on the raster map (same windows)", "raster_success"))
+        for name, key in methods:
+            lines.append(f"| {name} | {' | '.join(_pct([r[key] for r in by_len[L]]) for L in lengths)} | {_pct([r[key] for r in mine])} |")
+        lines += ["", "| plan coverage | windows | on the plan | on the raster map |" + (" exact search on the plan |" if reference else ""),
+                  "|---|---|---|---|" + ("---|" if reference else "")]
+        for label, keep in ((f">= {PLAN_COVERAGE}", lambda c: c >= PLAN_COVERAGE), (f"< {PLAN_COVERAGE}", lambda c: c < PLAN_COVERAGE)):
+            part = [r for r in mine if keep(r["coverage"])]
+            cells = [_pct([r["success"] for r in part]), _pct([r["raster_success"] for r in part])]
+            cells += [_pct([r["ref_success"] for r in part])] if reference else []
+            lines.append(f"| {label} | {len(part)} | {' | '.join(cells)} |")
+        if reference:
+            lost = [r for r in mine if not r["success"]]
+            lines.append(f"\nfailures on the plan: {len(lost)}, of which the reference fails too (the plan's): "
+                         f"{sum(not r['ref_success'] for r in lost)}, the reference succeeds (ours): {sum(r['ref_success'] for r in lost)}")
+        lines.append(f"median plan coverage {np.median([r['coverage'] for r in mine]):.2f}, map coverage {np.median([r['map_coverage'] for r in mine]):.2f}")
+        out.append("\n".join(lines))
+    return "\n\n".join(out)
+
+
+def plan_style_main(args, jobs: list, lengths: list[int]) -> int:
+    """--plan-style: every window against its held-out map drawn as a plan (no reference cache:
+    the cached references are the raster map's)."""
+    rows = _map(partial(run_window, plan_style=args.plan_style), jobs, args.workers)
+    for r in rows:
+        r["plan_style"] = args.plan_style
+    print(plan_table(rows, lengths, not args.no_reference))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    return 0
 
 
 def _pct(values) -> str:
@@ -279,6 +357,9 @@ def main(argv=None) -> int:
     parser.add_argument("--reference-only", action="store_true", help="only fill --reference-cache, then stop")
     parser.add_argument("--drift-free", action="store_true",
                         help="only the exact search on the laser windows placed by their true poses (what the held-out maps allow), then stop")
+    parser.add_argument("--plan-style", nargs="?", const="one-face", choices=PLAN_STYLES,
+                        help="localize against each held-out map redrawn as an architect's DXF plan (one line per wall, "
+                             "or two-face: both faces of each wall), beside the raster map on the same windows")
     args = parser.parse_args(argv)
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
@@ -300,6 +381,10 @@ def main(argv=None) -> int:
                 for camera in [False] * (not args.no_laser) + [True] * args.camera:
                     jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
+    if args.plan_style:
+        status = plan_style_main(args, jobs, lengths)
+        print(f"\n{len(jobs)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+        return status
     if args.drift_free:
         rows = _map(drift_free_row, list(dict.fromkeys(j[:3] for j in jobs)), args.workers)
         print("| drift-free exact search | " + " | ".join(f"#{L}" for L in lengths) + " | all |\n" + "|---" * (len(lengths) + 2) + "|")

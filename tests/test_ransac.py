@@ -259,3 +259,32 @@ def test_truncated_loss_ignores_walls_the_map_lacks():
     robust = refine_batch(fp, points, truth, RefineSettings(outlier_distance=0.3), "fixed")[0]
     assert abs(plain[0]) > 0.05  # pulled toward the unmapped wall
     assert np.abs(robust[:3]).max() < 0.02
+
+
+def test_a_noisy_map_gets_a_bounded_triplet_table_and_still_localizes(plain):
+    """A map of pure noise (every line near hundreds of others) used to grow its 3L table
+    with the cube of its clutter (200 x 200 cells: 7.3 GB). Past floorplan.max_triplets each
+    line keeps its nearest neighbours, with a warning; the plan builds and a round runs in a
+    bounded amount of memory."""
+    import tracemalloc
+
+    occ = make_rng(5, "noise-map").random((150, 150)) < 0.5
+    settings = Settings(floorplan={"max_triplets": 100_000}, estimator=CFG.estimator)
+    tracemalloc.start()
+    try:
+        noisy = Floorplan.from_occupancy(occ, RES, (0.0, 0.0), settings)
+        counts = np.array([len(nb) for nb in noisy.line_neighbours])
+        assert int((counts * (counts - 1)).sum()) > 10 * 100_000  # the full table would be far larger
+        with pytest.warns(UserWarning, match="max_triplets"):
+            matches = floorplan_matches(noisy, settings.estimator.solvers)
+        result = localize(noisy, plain[2], settings.estimator, make_rng(0, "noisy"), iterations=200)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert 0 < len(matches.triplets.rows) <= 100_000
+    assert isinstance(result, LocalizationResult)
+    assert peak < 400 * 2**20, f"peak {peak / 2**20:.0f} MiB"
+    # deterministic: the same plan gives the same thinned table
+    again = Floorplan.from_occupancy(occ, RES, (0.0, 0.0), settings)
+    with pytest.warns(UserWarning, match="max_triplets"):
+        assert np.array_equal(floorplan_matches(again, settings.estimator.solvers).triplets.rows, matches.triplets.rows)

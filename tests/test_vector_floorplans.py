@@ -142,6 +142,24 @@ def test_collinear_pieces_merge_and_round_rooms_are_walls():
     assert lengths == [1.0, 3.0, 4.0]  # the 0.1 m gap is bridged, the 1 m one is not
 
 
+def test_a_wall_drawn_in_thousands_of_pieces_merges_to_one_line_each():
+    """Pieces in any order, touching or up to gap apart, become one line per wall; the
+    merge runs per group of nearby parallel pieces (not a rescan of all after each merge)."""
+    rng = np.random.default_rng(3)
+    walls = [((0.0, 2.0 * k), (40.0, 2.0 * k)) for k in range(10)] + [((3.0 * k + 1.0, -5.0), (3.0 * k + 1.0, 25.0)) for k in range(5)]
+    pieces = []
+    for a, b in np.array(walls):
+        cuts = np.sort(rng.uniform(0, 1, 150))
+        for t0, t1 in zip(np.r_[0.0, cuts], np.r_[cuts, 1.0]):
+            t1 = max(t1 - rng.uniform(0, 0.2) / np.linalg.norm(b - a), t0 + 1e-3)  # gaps up to 0.2 m
+            pieces.append((a + t0 * (b - a), a + t1 * (b - a)))
+    pieces = np.array(pieces)[rng.permutation(len(pieces))]
+    merged = merge_collinear(pieces, angle_deg=5.0, offset=0.05, gap=0.3)
+    assert len(merged) == len(walls)
+    lengths = np.sort(np.linalg.norm(merged[:, 1] - merged[:, 0], axis=1))
+    assert np.allclose(lengths, [30.0] * 5 + [40.0] * 10, atol=0.2)  # the last piece may stop short of the end
+
+
 @pytest.mark.parametrize("kind", ["dxf", "geojson"])
 def test_laser_walk_localizes_on_the_vector_plan_as_on_the_raster(tmp_path, apartment, kind):
     path = write_dxf(apartment, tmp_path / "a.dxf") if kind == "dxf" else write_geojson(apartment, tmp_path / "a.geojson")

@@ -215,14 +215,11 @@ def deduplicate_lines(lines: LineSet, settings: LineSettings) -> LineSet:
     lo_j, hi_j = np.minimum(pj0, pj1).T, np.maximum(pj0, pj1).T  # [i, j]
     lo_i, hi_i = np.minimum(t_i0, t_i1)[:, None], np.maximum(t_i0, t_i1)[:, None]
     overlap = (np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)) > 0
-    dup = parallel & close & overlap
-    np.fill_diagonal(dup, False)
+    dup = np.triu(parallel & close & overlap, 1)  # i suppresses only later (shorter) j
     keep = np.ones(m, dtype=bool)
-    for i in range(m):  # greedy from the longest: a kept line suppresses its shorter repeats
+    for i in np.flatnonzero(dup.any(axis=1)):  # greedy from the longest: a kept line suppresses its shorter repeats
         if keep[i]:
-            later = dup[i].copy()
-            later[: i + 1] = False
-            keep &= ~later
+            keep &= ~dup[i]
     return L.subset(np.flatnonzero(keep))
 
 

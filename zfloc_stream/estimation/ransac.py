@@ -39,6 +39,7 @@ holds no hypothesis (besides re-scored warm starts), as early in a stream.
 from __future__ import annotations
 
 import time
+import warnings
 import weakref
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -150,6 +151,32 @@ def _ordered_triplets(neighbours: Sequence[np.ndarray]) -> np.ndarray:
         keep = j != k
         out.append(np.stack([np.full(keep.sum(), i), j[keep], k[keep]], axis=1))
     return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
+
+
+def _nearest_neighbours(lines: LineSet, neighbours: Sequence[np.ndarray], max_rows: int) -> tuple[list[np.ndarray], int | None]:
+    """Neighbour lists thinned so that their ordered triplets (sum of k (k - 1)) fit in
+    max_rows: each line keeps its K nearest neighbours (segment distance, ties by index),
+    K the largest that fits. A cluttered map (noise, a badly thresholded scan) has hundreds
+    of short lines within the neighbour distance of each other, and its triplet table
+    grows with the cube of its clutter. Returns (lists, K), K None when nothing was cut."""
+    k = np.array([len(nb) for nb in neighbours], dtype=np.int64)
+    if int((k * (k - 1)).sum()) <= max_rows:
+        return list(neighbours), None
+    lo, hi = 1, int(k.max())  # largest K with sum min(k, K) (min(k, K) - 1) <= max_rows
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        c = np.minimum(k, mid)
+        lo, hi = (mid, hi) if int((c * (c - 1)).sum()) <= max_rows else (lo, mid - 1)
+    ends = lines.endpoints
+    out = []
+    for i, nb in enumerate(neighbours):
+        if len(nb) <= lo:
+            out.append(nb)
+            continue
+        d = np.minimum(_point_segment_distance(ends[nb].reshape(-1, 2), ends[i : i + 1]).reshape(-1, 2).min(axis=1),
+                       _point_segment_distance(ends[i], ends[nb]).min(axis=0))
+        out.append(np.sort(nb[np.lexsort((nb, np.round(d, 9)))[:lo]]))
+    return out, lo
 
 
 def _ordered_pairs(neighbours: Sequence[np.ndarray]) -> np.ndarray:
@@ -289,8 +316,13 @@ class FloorplanMatches:
         par = np.deg2rad(solvers.parallel_angle_deg)
         alpha = _normal_angles(self.lines)
         neighbours = [np.asarray(nb, dtype=np.int64) for nb in floorplan.line_neighbours] if len(self.lines) else []
-        # 3L: a line, two of its neighbours, not all parallel
-        tri = _ordered_triplets(neighbours)
+        # 3L: a line, two of its neighbours, not all parallel (a bounded table: _nearest_neighbours)
+        near, kept = _nearest_neighbours(self.lines, neighbours, fp_cfg.max_triplets)
+        if kept is not None:
+            warnings.warn(f"floorplan {getattr(floorplan, 'name', '')!r}: its {len(self.lines)} lines have more line triplets than "
+                          f"floorplan.max_triplets ({fp_cfg.max_triplets:,}), a cluttered map: each line's triplets use its {kept} "
+                          "nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
+        tri = _ordered_triplets(near)
         if len(tri):
             a = alpha[tri]
             keep = ~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))

@@ -1,0 +1,117 @@
+"""Loading time of a large building's plan: a DXF of ~1,500 wall segments and its raster
+(~5,000 x 5,000 cells), as a user's `run --floorplan` would load them (numbers, not asserts).
+
+The building (seeded, drawn as an architect would): a 248 x 240 m floor, bands of rooms
+of random widths along corridors, every wall a LINE, doors as gaps, the long corridor walls
+drawn in pieces (one per room, so the loader's collinear merge has work), pillars as
+CIRCLEs in the corridors. The raster is the same plan drawn at 0.05 m (a ROS map YAML +
+PNG). Timed: Floorplan.load of each (primitives, distance field, line neighbours:
+everything a floorplan computes on construction), then the RANSAC per-plan tables
+(ransac.floorplan_matches) on first use and again (cached with the plan).
+
+    python benchmarks/bench_plan_load.py                 # goal: DXF <= 5 s, raster <= 3 s
+    python benchmarks/bench_plan_load.py --keep plan/    # keep the generated files
+    python benchmarks/bench_plan_load.py --set estimator.kernels=numba
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import ezdxf
+import numpy as np
+
+from zfloc_stream.config import load_settings
+from zfloc_stream.estimation.ransac import floorplan_matches
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.rng import make_rng
+
+WIDTH, HEIGHT = 248.0, 240.0  # m
+BAND = 17.0  # m: rooms 6.5 m deep either side of a 4 m corridor
+DOOR = 1.0  # m
+
+
+def building_segments(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(segments (N, 2, 2), pillars (M, 3)) of the generated floor, in metres."""
+    rng = make_rng(seed, "bench-plan-load")
+    segs = [((0, 0), (WIDTH, 0)), ((WIDTH, 0), (WIDTH, HEIGHT)), ((WIDTH, HEIGHT), (0, HEIGHT)), ((0, HEIGHT), (0, 0))]
+    pillars = []
+    y0 = 0.0
+    while y0 + BAND <= HEIGHT:
+        corridor = (y0 + 6.5, y0 + 10.5)
+        for side, (wall_y, far_y) in enumerate(((corridor[0], y0), (corridor[1], y0 + BAND))):
+            x = 0.0
+            while x < WIDTH - 1e-9:
+                w = min(float(rng.uniform(8.0, 16.0)), WIDTH - x)
+                if w < 2.5:  # a sliver at the end joins the last room
+                    segs.append(((x, wall_y), (WIDTH, wall_y)))
+                    break
+                door = x + float(rng.uniform(0.5, w - DOOR - 0.5))
+                segs.append(((x, wall_y), (door, wall_y)))  # corridor wall in pieces, a door gap
+                segs.append(((door + DOOR, wall_y), (x + w, wall_y)))
+                if x + w < WIDTH - 1e-9:
+                    segs.append(((x + w, wall_y), (x + w, far_y)))  # partition
+                x += w
+        if y0 + BAND < HEIGHT - 1e-9:
+            segs.append(((0, y0 + BAND), (WIDTH, y0 + BAND)))  # back wall between bands
+        pillars += [(x, (corridor[0] + corridor[1]) / 2, 0.25) for x in np.arange(20.0, WIDTH - 10, 30.0)]
+        y0 += BAND
+    return np.array(segs, dtype=float), np.array(pillars, dtype=float).reshape(-1, 3)
+
+
+def write_dxf(segments: np.ndarray, pillars: np.ndarray, path: Path) -> Path:
+    doc = ezdxf.new(units=6)  # metres
+    msp = doc.modelspace()
+    for a, b in segments:
+        msp.add_line(tuple(a), tuple(b), dxfattribs={"layer": "WALLS"})
+    for x, y, r in pillars:
+        msp.add_circle((x, y), r, dxfattribs={"layer": "COLUMNS"})
+    doc.saveas(path)
+    return path
+
+
+def timed(fn):
+    t0 = time.perf_counter()
+    value = fn()
+    return value, time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--keep", type=Path, help="write the plan files here (default: a temporary folder)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="settings override, e.g. estimator.kernels=numba (compiled line extraction)")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = args.keep if args.keep is not None else Path(tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        segments, pillars = building_segments(args.seed)
+        dxf = write_dxf(segments, pillars, out / "building.dxf")
+        settings = load_settings(overrides=args.set)
+        if settings.estimator.kernels == "numba":  # compile outside the timings
+            Floorplan.load(write_dxf(segments[:40], pillars[:2], out / "warm.dxf"), settings=settings)
+        plan, t_dxf = timed(lambda: Floorplan.load(dxf, settings=settings))
+        _, t_dxf_tables = timed(lambda: floorplan_matches(plan, settings.estimator.solvers))
+        _, t_dxf_cached = timed(lambda: floorplan_matches(plan, settings.estimator.solvers))
+        raster_yaml = Floorplan.write_ros(plan, out, "raster")  # the base method: a plain ROS map, no vector key
+        raster, t_raster = timed(lambda: Floorplan.load(raster_yaml, settings=settings))
+        _, t_raster_tables = timed(lambda: floorplan_matches(raster, settings.estimator.solvers))
+        h, w = raster.shape
+        print(f"plan: {WIDTH:.0f} x {HEIGHT:.0f} m, {len(segments)} LINE segments + {len(pillars)} pillars -> "
+              f"{len(plan.lines)} lines, {len(plan.circles)} circles")
+        print(f"raster: {w} x {h} cells at {raster.resolution} m -> {len(raster.lines)} lines, {len(raster.circles)} circles")
+        print("| load | seconds | goal |\n|---|---|---|")
+        print(f"| DXF plan (Floorplan.load) | {t_dxf:.2f} | <= 5 |")
+        print(f"| raster plan (Floorplan.load) | {t_raster:.2f} | <= 3 |")
+        print(f"| RANSAC tables, DXF plan (first use / cached) | {t_dxf_tables:.2f} / {t_dxf_cached:.4f} | |")
+        print(f"| RANSAC tables, raster plan (first use) | {t_raster_tables:.2f} | |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

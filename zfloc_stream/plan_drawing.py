@@ -1,0 +1,103 @@
+"""A raster map redrawn as an architect's plan: straight wall segments, no clutter.
+
+    segments = draw_plan(floorplan)                      # (N, 2, 2) metres, one line per wall
+    write_plan_dxf(segments, "plan.dxf")                 # LINEs in metres, loaded by the vector path
+    write_plan_dxf(two_faces(segments, 0.2), "plan.dxf") # walls drawn as both their faces
+
+What a plan holds and a map made by the sensor does not: walls only. So the map's wall
+cells are cleaned of blobs smaller than `min_blob` (furniture, people, scan noise), wall
+segments are fitted to the rest with OpenCV's probabilistic Hough transform (segments of at
+least `min_length`, pixel gaps shorter than `max_gap` bridged, so door openings stay gaps),
+the parallel duplicates a thick wall gives are merged (vector_floorplan.merge_collinear, then
+primitives.deduplicate_lines) and pieces still shorter than `min_length` dropped. Walls the
+fit misses stay missing: a plan drawn from a map is an imperfect plan, as real ones are.
+
+Used by benchmarks/eval_real.py --plan-style to localize against plans of real buildings
+(the Carmen logs' held-out maps) instead of the maps themselves.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from .config import LineSettings
+from .floorplan import Floorplan, blob_spans
+from .geometry import LineSet
+from .primitives import deduplicate_lines
+from .vector_floorplan import merge_collinear
+
+
+def _support(walls: np.ndarray, cols_rows: np.ndarray) -> np.ndarray:
+    """(N,) share of each pixel segment's points (one per pixel) on or next to a wall pixel."""
+    near = ndimage.binary_dilation(walls, structure=np.ones((3, 3), dtype=bool))
+    length = np.linalg.norm(cols_rows[:, 1] - cols_rows[:, 0], axis=1)
+    count = np.ceil(length).astype(np.int64) + 1
+    owner = np.repeat(np.arange(len(cols_rows)), count)
+    t = (np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)) / np.repeat(np.maximum(count - 1, 1), count)
+    p = np.rint(cols_rows[owner, 0] + t[:, None] * (cols_rows[owner, 1] - cols_rows[owner, 0])).astype(np.int64)
+    on = near[np.clip(p[:, 1], 0, walls.shape[0] - 1), np.clip(p[:, 0], 0, walls.shape[1] - 1)]
+    return np.bincount(owner, weights=on, minlength=len(cols_rows)) / count
+
+
+def draw_plan(floorplan: Floorplan, min_length: float = 0.5, min_blob: float = 0.6, max_gap: float = 0.25,
+              merge_offset: float = 0.1, votes: float = 0.3, min_support: float = 0.85) -> np.ndarray:
+    """(N, 2, 2) wall segments in metres fitted to the floorplan's wall cells.
+
+    min_length: shortest wall drawn (m); min_blob: blobs whose bounding box is smaller
+    than this (m) are clutter; max_gap: wall pixels this far apart (m) along a segment are
+    one wall, larger openings (doors) stay open; merge_offset: parallel pieces this close
+    (m) are one wall (a thick wall's several Hough lines); votes: the Hough accumulator
+    threshold as a length (m) of wall pixels on the line; min_support: the share of a
+    segment's length that must run on wall pixels (the Hough transform also joins
+    scattered clutter into lines)."""
+    res = floorplan.resolution
+    labels, span = blob_spans(floorplan.occupied)
+    keep = span >= min_blob / res
+    keep[0] = False
+    walls = keep[labels]  # clutter (small blobs) removed
+    if not walls.any():
+        return np.zeros((0, 2, 2))
+    found = cv2.HoughLinesP(walls.astype(np.uint8) * 255, 1, np.pi / 360, max(int(round(votes / res)), 2),
+                            minLineLength=max(min_length / res, 2.0), maxLineGap=max_gap / res)
+    if found is None:
+        return np.zeros((0, 2, 2))
+    cols_rows = found.reshape(-1, 2, 2).astype(float)  # (col, row) pixel centres
+    cols_rows = cols_rows[_support(walls, cols_rows) >= min_support]  # no lines across scattered clutter
+    segs = floorplan.origin + (cols_rows + 0.5) * res
+    segs = merge_collinear(segs, angle_deg=3.0, offset=merge_offset, gap=max_gap)
+    segs = segs[np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) >= min_length]
+    if not len(segs):
+        return segs
+    dedup = LineSettings(dedup_angle_deg=3.0, dedup_offset=merge_offset + res)
+    return deduplicate_lines(LineSet.from_endpoints(segs), dedup).endpoints.copy()
+
+
+def two_faces(segments: np.ndarray, thickness: float) -> np.ndarray:
+    """Each wall drawn as its two faces, thickness/2 either side of the centre line (as
+    plans draw walls): (2N, 2, 2)."""
+    segs = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+    d = segs[:, 1] - segs[:, 0]
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+    shift = 0.5 * thickness * n[:, None, :]
+    return np.concatenate([segs + shift, segs - shift])
+
+
+def write_plan_dxf(segments: np.ndarray, path) -> Path:
+    """The segments as LINE entities on layer WALLS, in metres ($INSUNITS 6)."""
+    import ezdxf
+
+    path = Path(path)
+    doc = ezdxf.new(units=6)
+    doc.layers.add("WALLS")
+    msp = doc.modelspace()
+    for a, b in np.asarray(segments, dtype=float).reshape(-1, 2, 2):
+        msp.add_line((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), dxfattribs={"layer": "WALLS"})
+    doc.saveas(path)
+    return path
+
+
+__all__ = ["draw_plan", "two_faces", "write_plan_dxf"]
