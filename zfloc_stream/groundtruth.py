@@ -84,8 +84,11 @@ def load_groundtruth(path: str | Path, max_gap: float | None = None) -> GroundTr
         raise InputError(f"{path}: ground truth must be a TUM file (timestamp tx ty tz qx qy qz qw) or a CSV with a "
                          f"header naming x, y, theta (+ optional frame or timestamp column)"
                          + (f"; missing {', '.join(missing)}" if rows and missing else ""))
+    def number(text) -> float:  # an empty cell (no truth for that frame) reads as NaN
+        return float(text) if text is not None and text.strip() else float("nan")
+
     try:
-        poses = np.array([[float(r[columns[c]]) for c in ("x", "y", "theta")] for r in rows])
+        poses = np.array([[number(r[columns[c]]) for c in ("x", "y", "theta")] for r in rows])
         if "frame" in columns:
             frames = [int(float(r[columns["frame"]])) for r in rows]
         elif "timestamp" in columns:

@@ -75,14 +75,17 @@ def print_warning(text: str) -> None:
 
 
 def install_warning_format() -> None:
-    """Python warnings (from loaders, the session writer...) as one line each, without the
-    source line Python adds; each distinct message once."""
+    """Python warnings (from loaders, the session writer...) as one `warning: ...` line,
+    without the file, line number and source line Python adds. Only the formatting is
+    replaced: filters, and pytest.warns / catch_warnings(record=True), work as before."""
 
-    def show(message, category, filename, lineno, file=None, line=None):
-        print_warning(message)
+    def one_line(message, category, filename, lineno, line=None):
+        if _active_bar is not None:  # above the bar, not into it
+            print_warning(message)
+            return ""
+        return "warning: " + " ".join(str(message).split()) + "\n"
 
-    warnings.showwarning = show
-    warnings.simplefilter("default")
+    warnings.formatwarning = one_line
 
 
 class Progress:
