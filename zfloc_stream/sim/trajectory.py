@@ -106,8 +106,8 @@ def plan_path(scene, start, goal, ws: WalkSettings = WalkSettings()) -> np.ndarr
     if not np.isfinite(dist[b]):
         raise InputError(
             f"no walkable path from {_xy(start)} to {_xy(goal)}: openings need a clear width of at least "
-            f"{2 * ws.clearance:.1f} m (walk clearance {ws.clearance:g} m each side); check the plan's door gaps, "
-            "its --scale, or leave door leaves out with --skip-layers"
+            f"{2 * ws.clearance:.1f} m (walk clearance {ws.clearance:g} m each side): check the drawing's scale "
+            "(--scale M_PER_UNIT) or widen the openings in the plan"
         )
     chain = [b]
     while chain[-1] != a:

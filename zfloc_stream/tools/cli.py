@@ -265,6 +265,8 @@ def cmd_run(args) -> int:
 
 
 def _report(outcome, settings) -> None:
+    import numpy as np
+
     from ..tum import moved_note
 
     last = outcome.estimates[-1] if outcome.estimates else None
@@ -294,7 +296,9 @@ def _report(outcome, settings) -> None:
     errors = outcome.final_errors()
     if errors is not None and last.pose is not None:
         ok = bool((errors <= threshold).all())
-        print(f"final position error: {errors[-1]:.3f} m; last-{len(errors)} max {errors.max():.3f} m; success@{threshold:g}m: {'yes' if ok else 'no'}")
+        missing = int((~np.isfinite(errors)).sum())
+        tail = f"last-{len(errors)} max {errors.max():.3f} m" if not missing else f"{missing} of the last {len(errors)} frames without a pose"
+        print(f"final position error: {errors[-1]:.3f} m; {tail}; success@{threshold:g}m: {'yes' if ok else 'no'}")
 
 
 def cmd_export(args) -> int:
