@@ -125,7 +125,7 @@ def _foxglove_client(url, received, ready, done):
     from websockets.sync.client import connect
 
     channels, next_id, subs = {}, 1, {}
-    with connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=10) as ws:
+    with connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=10, max_size=None) as ws:
         ready.set()
         while not done.is_set() or subs and len(received) == 0:
             try:

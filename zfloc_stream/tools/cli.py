@@ -6,9 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..config import dump_settings, load_settings
 from ..errors import InputError, ZflocError
-from .cli_support import CliParser, install_warning_format, print_warning
+from .cli_support import CliParser, install_warning_format, prepare_out_dir, print_warning
 
 EPILOG = """examples:
   zfloc-stream demo                                   # apartment scene, seed 0, into ./zfloc-demo
@@ -141,6 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def load_settings(*args, **kwargs):
+    """config.load_settings, imported on first use (pydantic is not needed for --help)."""
+    from ..config import load_settings as load
+
+    return load(*args, **kwargs)
+
+
 def _settings(args):
     return load_settings(args.config, args.set)
 
@@ -166,13 +172,13 @@ def _start_live(args):
 
 
 def cmd_demo(args) -> int:
-    from ..sim import SimSettings, build_scene, simulate
-    from .session_runner import prepare_out_dir, run_session
-
-    settings = load_settings(args.config, args.set, base_overrides={"seed": args.seed})
     if args.frames < 1:
         raise InputError("--frames must be at least 1")
-    prepare_out_dir(args.out)
+    prepare_out_dir(args.out, create=False)
+    from ..sim import SimSettings, build_scene, simulate
+    from .session_runner import run_session
+
+    settings = load_settings(args.config, args.set, base_overrides={"seed": args.seed})
     if args.floorplan is not None:
         from ..sim import build_scene_from_floorplan
 
@@ -204,10 +210,11 @@ def _topics_line(args, sequence) -> str:
 
 
 def cmd_run(args) -> int:
+    prepare_out_dir(args.out, create=False)
     from ..backbones import Perception
     from ..datasets import detect_source
     from ..datasets.ros2 import parse_topic_overrides
-    from .session_runner import prepare_out_dir, run_session
+    from .session_runner import run_session
 
     settings = _run_settings(args)
     topics = parse_topic_overrides(args.topic)
@@ -221,7 +228,6 @@ def cmd_run(args) -> int:
         from ..groundtruth import load_groundtruth
 
         groundtruth = load_groundtruth(args.groundtruth, max_gap=settings.datasets.ros2.max_odometry_gap)
-    prepare_out_dir(args.out)
     floorplan = None
     if args.floorplan is not None:
         floorplan = load_floorplan(args, settings)
@@ -313,6 +319,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_config(args) -> int:
+    from ..config import dump_settings
+
     sys.stdout.write(dump_settings(_settings(args)))
     return 0
 

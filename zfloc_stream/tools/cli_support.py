@@ -14,6 +14,9 @@ import re
 import sys
 import time
 import warnings
+from pathlib import Path
+
+from ..errors import InputError
 
 
 def did_you_mean(word: str, candidates, cutoff: float = 0.6) -> str:
@@ -143,3 +146,19 @@ class Progress:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def prepare_out_dir(out_dir, create: bool = True) -> Path:
+    """The output folder, created; a clear error when the path is a file or cannot be made.
+    create=False only checks (the CLI does so before any heavy work, so the mistake costs no
+    waiting and a later error leaves no empty folder behind)."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"--out {out_dir} is a file, not a folder: name a folder (it is created if missing)")
+    if not create:
+        return out_dir
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"--out {out_dir}: cannot create the folder: {err.strerror or err}") from None
+    return out_dir

@@ -20,7 +20,7 @@ from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
 from ..tum import TumStamps, TumWriter
-from .cli_support import Progress
+from .cli_support import Progress, prepare_out_dir
 
 TUM_NAME = "trajectory.tum"  # beside trajectory.csv unless --tum names another path
 TRUTH_TUM_NAME = "groundtruth.tum"  # the reference for evo_ape, same stamps as trajectory.tum
@@ -89,18 +89,6 @@ class SessionOutcome:
         stat = (lambda f: float(f(posed))) if posed.size else (lambda f: float("nan"))
         return ErrorSummary(threshold, int(known.sum()), int(posed.size), stat(np.mean), stat(np.median), stat(np.max),
                             int((posed > threshold).sum()), by_status)
-
-
-def prepare_out_dir(out_dir: str | Path) -> Path:
-    """The output folder, created; a clear error when the path is a file or cannot be made."""
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"--out {out_dir} is a file, not a folder: name a folder (it is created if missing)")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise InputError(f"--out {out_dir}: cannot create the folder: {err.strerror or err}") from None
-    return out_dir
 
 
 def run_session(
