@@ -190,3 +190,25 @@ def test_live_view_serves_floorplan_bev_and_poses_to_a_websocket_client(laser, t
     assert (pose.x, pose.y) == pytest.approx((float(row["x"]), float(row["y"])), abs=1e-9)
     grid = [p for t, _, _, p in received if t == S.TOPIC_FLOORPLAN][0]
     assert len(grid) > 100  # the floorplan, re-sent to this late subscriber
+
+
+def test_overlay_marks_the_start_colours_the_path_by_status_and_names_every_marker():
+    import matplotlib.pyplot as plt
+
+    from zfloc_stream.overlay import STATUS_COLOURS, overlay_figure
+
+    plan = build_scene("rooms", seed=0).floorplan
+    est = np.array([[np.nan] * 3, [1.0, 1.0, 0.0], [2.0, 1.0, 0.0], [3.0, 1.5, 0.5], [3.5, 2.0, 1.0]])
+    truth = est + 0.1
+    truth[0] = [0.9, 0.9, 0.0]
+    fig = overlay_figure(plan, est, truth, statuses=["initializing", "initializing", "tracking", "ambiguous", "tracking"])
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    plt.close(fig)
+    assert labels == ["ground truth", "ground truth start", "ground truth end", "estimate (initializing)",
+                      "estimate (tracking)", "estimate (ambiguous)", "estimate start (first pose)", "final estimated pose and heading"]
+    segments = ax.collections[-1]
+    colours = [tuple(c) for c in segments.get_colors()]
+    from matplotlib.colors import to_rgba
+
+    assert colours == [to_rgba(STATUS_COLOURS[s]) for s in ("tracking", "ambiguous", "tracking")]

@@ -21,8 +21,16 @@ from .sim2 import Sim2  # noqa: E402
 STATUS_COLOURS = {"initializing": "tab:gray", "tracking": "tab:green", "ambiguous": "tab:purple", "lost": "tab:red"}
 
 
-def save_overlay(
-    path: str | Path,
+def save_overlay(path: str | Path, floorplan: Floorplan, estimated: np.ndarray, truth: np.ndarray | None = None, **kwargs) -> Path:
+    """The figure of overlay_figure written to path (PNG)."""
+    fig = overlay_figure(floorplan, estimated, truth, **kwargs)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def overlay_figure(
     floorplan: Floorplan,
     estimated: np.ndarray,
     truth: np.ndarray | None = None,
@@ -30,7 +38,7 @@ def save_overlay(
     alignment: Sim2 | None = None,
     title: str = "",
     statuses: list[str] | None = None,
-) -> Path:
+):
     """estimated / truth: (N, 3) poses in the floorplan (rows of NaN where none); statuses:
     the status of each estimated frame (the path's colours; one colour without them)."""
     from matplotlib.collections import LineCollection
@@ -90,7 +98,4 @@ def save_overlay(
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
