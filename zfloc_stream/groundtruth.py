@@ -18,17 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .datasets.base import planar_pose_matrix
 from .errors import InputError
 from .pose_interpolation import PoseTrack
 from .tum import read_tum
-
-
-def _planar_matrix(x: float, y: float, theta: float) -> np.ndarray:
-    T = np.eye(4)
-    c, s = np.cos(theta), np.sin(theta)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:2, 3] = (x, y)
-    return T
 
 
 class GroundTruth:
@@ -51,7 +44,7 @@ class GroundTruth:
 def _track(path: Path, stamps, poses, max_gap: float | None) -> PoseTrack:
     track = PoseTrack(f"ground truth {path.name}", max_gap)
     for t, (x, y, th) in zip(stamps, poses):
-        track.add(int(round(float(t) * 1e9)), _planar_matrix(x, y, th))
+        track.add(int(round(float(t) * 1e9)), planar_pose_matrix(x, y, th))
     return track
 
 
