@@ -217,3 +217,21 @@ def test_short_run_says_no_pose_yet(tmp_path, capsys):
     rc, out, err = call(capsys, cli.main, "demo", "--frames", "3", "--out", tmp_path / "d", "--no-progress")
     assert rc == 0, err
     assert "no pose yet" in out and "nan" not in out and "inf" not in out
+
+
+def test_progress_off_a_terminal_is_plain_periodic_lines():
+    import io
+
+    from zfloc_stream.tools.cli_support import Progress
+
+    stream = io.StringIO()  # a log file: not a terminal, so no bar and no carriage returns
+    with Progress(4, "run x", "frame", stream=stream, every=0.0) as bar:
+        for _ in range(4):
+            bar.update()
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue()
+    assert lines[0].startswith("run x: 1/4 frames") and lines[3].startswith("run x: 4/4 frames")
+    quiet = io.StringIO()
+    with Progress(4, "run x", stream=quiet, enabled=False) as bar:  # --no-progress
+        bar.update(4)
+    assert quiet.getvalue() == ""
