@@ -212,3 +212,21 @@ def test_overlay_marks_the_start_colours_the_path_by_status_and_names_every_mark
     from matplotlib.colors import to_rgba
 
     assert colours == [to_rgba(STATUS_COLOURS[s]) for s in ("tracking", "ambiguous", "tracking")]
+
+
+def test_a_ros2_bag_gets_ground_truth_from_a_tum_file_and_run_names_its_topics(laser, tmp_path, capsys):
+    """A robot's bag carries no truth: --groundtruth gives it, matched by the scans' stamps."""
+    from ros2_bag import mount, write_sensor_bag
+
+    tmp, scene, seq, truth = laser
+    bag = tmp_path / "robot.mcap"
+    stamps = write_sensor_bag(bag, seq.frames, mount(0.0, 0.0, 0.3), sensor_hz=10, odom_hz=40)
+    (tmp_path / "gt.tum").write_text("".join(tum_line(ns / 1e9, *t) for ns, t in zip(stamps, truth)))
+    plan = scene.floorplan.write_ros(tmp_path / "plan")
+    assert main(["run", "--floorplan", str(plan), "--input", str(bag), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "input: ROS 2 bag" in out and "scan=/scan" in out and "position error" not in out
+    assert main(["run", "--floorplan", str(plan), "--input", str(bag), "--groundtruth", str(tmp_path / "gt.tum"),
+                 "--out", str(tmp_path / "g"), "--no-progress"]) == 0
+    summary = _summary(capsys.readouterr().out)
+    assert summary["posed"] >= N - 4 and summary["mean"] < 0.5

@@ -205,7 +205,8 @@ def _topics_line(args, sequence) -> str:
     text = f"input: {names.get(kind, kind)} {args.input}"
     topics = getattr(sequence, "topics", None)
     if topics:
-        text += "; topics: " + ", ".join(f"{role}={topic}" if not topic.endswith("/" + role) else topic for role, topic in topics.items())
+        # a bag's topics are found by type: say which role each one plays
+        text += "; topics: " + ", ".join(topic if kind == "mcap" else f"{role}={topic}" for role, topic in topics.items())
     return text
 
 
