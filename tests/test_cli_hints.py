@@ -235,3 +235,26 @@ def test_progress_off_a_terminal_is_plain_periodic_lines():
     with Progress(4, "run x", stream=quiet, enabled=False) as bar:  # --no-progress
         bar.update(4)
     assert quiet.getvalue() == ""
+
+
+@pytest.mark.parametrize("prog, build", [("zfloc-stream", cli.build_parser), ("zfloc-replay", replay_cli.build_parser),
+                                         ("zfloc-study", study_cli.build_parser)])
+def test_every_help_example_parses(prog, build, capsys):
+    """The example lines of every --help (top level and each command) are commands the
+    parser accepts as written: no option that does not exist, no missing argument."""
+    parser = build()
+    helps = [parser.format_help()]
+    for action in parser._actions:
+        if action.__class__.__name__ == "_SubParsersAction":
+            helps += [sub.format_help() for sub in action.choices.values()]
+    examples = []
+    for text in helps:
+        joined = re.sub(r"\\\n\s*", " ", text)  # continued example lines
+        examples += [re.split(r" [>|] ", line.split("#")[0])[0].strip()  # the command, not the shell around it
+                     for line in joined.splitlines() if line.strip().startswith(prog + " ")]
+    assert len(examples) >= 3
+    for example in examples:
+        try:
+            build().parse_args(shlex.split(example)[1:])
+        except SystemExit as exit_:
+            pytest.fail(f"{example!r}: {capsys.readouterr().err.strip()} (exit {exit_.code})")
