@@ -13,17 +13,10 @@ from mcap_ros2.writer import Writer
 from zfloc_stream.pose_interpolation import interpolate_pose
 from zfloc_stream.session.schemas import quaternion_from_matrix
 
-SEP = "=" * 80 + "\n"
-TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
-HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
-VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
-POINT = "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
-QUATERNION = "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
-
-
-def _msgdef(main: str, *deps: str) -> str:
-    return main + "".join(SEP + d for d in deps)
-
+# the pieces the package's own ROS 2 output uses (zfloc_stream/ros2_output.py)
+from zfloc_stream.ros2_output import HEADER, POINT, POSE, QUATERNION, TIME, VECTOR3
+from zfloc_stream.ros2_output import MSGDEFS as OUTPUT_MSGDEFS
+from zfloc_stream.ros2_output import msgdef as _msgdef
 
 MSGDEFS = {
     "sensor_msgs/msg/LaserScan": _msgdef(
@@ -34,16 +27,10 @@ MSGDEFS = {
         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
         "geometry_msgs/TwistWithCovariance twist\n", HEADER, TIME,
         "MSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n",
-        "MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
-        POINT, QUATERNION,
+        POSE, POINT, QUATERNION,
         "MSG: geometry_msgs/TwistWithCovariance\ngeometry_msgs/Twist twist\nfloat64[36] covariance\n",
         "MSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n", VECTOR3),
-    "tf2_msgs/msg/TFMessage": _msgdef(
-        "geometry_msgs/TransformStamped[] transforms\n",
-        "MSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\nstring child_frame_id\n"
-        "geometry_msgs/Transform transform\n", HEADER, TIME,
-        "MSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n",
-        VECTOR3, QUATERNION),
+    "tf2_msgs/msg/TFMessage": OUTPUT_MSGDEFS["tf2_msgs/msg/TFMessage"],
     "sensor_msgs/msg/Image": _msgdef(
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n"
         "uint32 step\nuint8[] data\n", HEADER, TIME),

@@ -67,7 +67,7 @@ def test_resume_skips_finished_cells(tmp_path):
         assert (tmp_path / name).is_file()
     report = json.loads((tmp_path / "results.json").read_text())
     assert report["summary"][0]["length"] == 15 and report["summary"][0]["n_runs"] == 4
-    assert "#15 SR@1m (%)" in (tmp_path / "results.md").read_text()
+    assert "SR@1m #15 (%)" in (tmp_path / "results.md").read_text()
     # other settings in the same folder are refused
     with pytest.raises(InputError, match="different settings"):
         run_study(overrides={"localizer": {"every_k_frames": 3}}, **kwargs)
@@ -139,3 +139,25 @@ def test_an_existing_scheduler_runs_the_cells(tmp_path):
         remote = run_study([GIBSON], [20], [0], tmp_path / "remote", scheduler=cluster.scheduler_address, progress=False)
     local = run_study([GIBSON], [20], [0], tmp_path / "local", workers=0, progress=False)
     assert remote.ran == 2 and _metrics(remote.rows) == _metrics(local.rows)
+
+
+def test_table_columns_read_in_order_and_one_seed_has_no_spread(tmp_path):
+    """SR at each length longest first, then the RMSEs of the longest, each named with its
+    length; one seed prints the value alone (no "± 0.0"); the plot draws every line."""
+    from zfloc_stream.study import markdown_table, plot_sr_vs_length
+
+    def stat(mean, std=float("nan")):
+        return {"mean": mean, "std": std}
+
+    summary = [{"dataset": "sim:rooms", "length": L, "success_rate": {"1": stat(sr), "0.5": stat(sr)},
+                "rmse_succ": stat(0.2), "rmse_all": stat(0.4), "n_runs": 3, "n_no_pose": 0, "n_errors": 0}
+               for L, sr in ((35, 1.0), (20, 0.5), (15, 0.25))]
+    table = markdown_table(summary, [15, 20, 35], [1.0, 0.5])
+    head = table.splitlines()[0]
+    assert head == "| Dataset | SR@1m #35 (%) | SR@1m #20 (%) | SR@1m #15 (%) | RMSE_succ #35 (m) | RMSE_all #35 (m) |"
+    assert table.splitlines()[2] == "| sim:rooms | 100.0 | 50.0 | 25.0 | 0.20 | 0.40 |"
+    assert "±" not in table
+    summary[0]["success_rate"]["1"] = stat(1.0, 0.0)  # two seeds that agree: a real zero spread
+    assert "100.0 ± 0.0" in markdown_table(summary, [15, 20, 35], [1.0, 0.5])
+    plot_sr_vs_length(summary, [1.0, 0.5], tmp_path / "p.png")
+    assert (tmp_path / "p.png").stat().st_size > 0

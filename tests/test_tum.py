@@ -39,15 +39,33 @@ def test_tum_rows_are_planar_poses_with_yaw_quaternions(tmp_path):
     with TumWriter(path) as tum:
         tum.write(_est(0, 1.0, None))  # no pose yet: left out
         tum.write(_est(1, 1.5, [1.0, 2.0, math.pi / 2]))
-        tum.write(_est(2, 1.5, [9.0, 9.0, 0.0]))  # same stamp again: left out
+        tum.write(_est(2, 1.5, [9.0, 9.0, 0.0]))  # same stamp again: kept, 1 us later
         tum.write(_est(3, 2.0, [1.5, -2.0, -3.0]))
+    assert (tum.rows, tum.moved) == (3, 1)
     stamps, xyz, quat = read_like_evo(path)
-    np.testing.assert_allclose(stamps, [1.5, 2.0])
-    np.testing.assert_allclose(xyz, [[1.0, 2.0, 0.0], [1.5, -2.0, 0.0]])
+    np.testing.assert_allclose(stamps, [1.5, 1.5 + 1e-6, 2.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(xyz, [[1.0, 2.0, 0.0], [9.0, 9.0, 0.0], [1.5, -2.0, 0.0]])
     np.testing.assert_allclose(quat[0], [0, 0, math.sin(math.pi / 4), math.cos(math.pi / 4)])
-    yaw = 2 * np.arctan2(quat[1, 2], quat[1, 3])
+    yaw = 2 * np.arctan2(quat[2, 2], quat[2, 3])
     assert math.isclose(math.remainder(yaw + 3.0, 2 * math.pi), 0.0, abs_tol=1e-12)
     assert path.read_text().splitlines()[0].startswith("# timestamp tx ty tz qx qy qz qw")
+
+
+def test_repeated_stamps_keep_every_pose_and_both_writers_share_stamps(tmp_path):
+    """One input stamp for every frame (belgioioso-camera-50) keeps every posed frame, and
+    a ground-truth writer fed the same frames gets the same stamps (evo pairs them)."""
+    from zfloc_stream.tum import read_tum
+
+    with TumWriter(tmp_path / "est.tum") as est, TumWriter(tmp_path / "gt.tum") as gt:
+        for i in range(6):
+            est.write(_est(i, 1e9, None if i < 2 else [i, 0.0, 0.1 * i]))
+            gt.write_pose(1e9, [i, 1.0, 0.1 * i])
+    assert (est.rows, est.moved, gt.rows, gt.moved) == (4, 4, 6, 5)
+    t_est, p_est = read_tum(tmp_path / "est.tum")
+    t_gt, p_gt = read_tum(tmp_path / "gt.tum")
+    assert np.all(np.diff(t_gt) > 0)
+    np.testing.assert_array_equal(t_est, t_gt[2:])  # same stamp for the same frame
+    np.testing.assert_allclose(p_est[:, 2], [0.2, 0.3, 0.4, 0.5], atol=1e-12)
 
 
 def test_run_writes_tum_beside_the_csv_and_export_rewrites_it_from_the_session(tmp_path, capsys):

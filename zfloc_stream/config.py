@@ -623,6 +623,18 @@ def allowed_range(info) -> str | None:
     return text + (" (integer)" if info.annotation is int else "")
 
 
+def _suggest_key(parts: tuple) -> str:
+    """' (did you mean 'a.b.c'?)' for an unknown key: the nearest field of its section."""
+    import difflib
+
+    info = _field_info(Settings, parts[:-1]) if len(parts) > 1 else None
+    model = Settings if len(parts) == 1 else getattr(info, "annotation", None)
+    if not (isinstance(model, type) and issubclass(model, BaseModel)) or not isinstance(parts[-1], str):
+        return ""
+    match = difflib.get_close_matches(parts[-1], list(model.model_fields), n=1, cutoff=0.6)
+    return f" (did you mean '{'.'.join(str(p) for p in (*parts[:-1], match[0]))}'?)" if match else ""
+
+
 def _bound(v: float) -> str:
     return str(v) if isinstance(v, int) else f"{v:.10g}"
 
@@ -637,7 +649,7 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
     parts = tuple(first["loc"])
     loc = ".".join(str(p) for p in parts) or "<root>"
     if first["type"] == "extra_forbidden":
-        return f"{source}: unknown setting '{loc}'"
+        return f"{source}: unknown setting '{loc}'" + _suggest_key(parts)
     if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
         ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
         message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), first["msg"])

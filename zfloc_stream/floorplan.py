@@ -186,14 +186,14 @@ class Floorplan:
         if suffix in IMAGE_SUFFIXES:
             missing = [k for k, v in (("resolution", resolution), ("origin", origin)) if v is None]
             if missing:
-                raise FloorplanError(f"{path}: an image floorplan needs {' and '.join(missing)} (e.g. --resolution 0.05 --origin X,Y)")
+                raise FloorplanError(f"{path}: an image floorplan needs {' and '.join(missing)} (e.g. --resolution 0.05 --origin X Y: metres per pixel, then the metric position of the lower-left corner)")
             img = _read_gray(path)
             cfg = settings if settings is not None else Settings()
             occ = (255.0 - img) / 255.0 > cfg.floorplan.image_wall_threshold
             if flip_y:
                 occ = occ[::-1]
             return cls(occ, resolution, origin, cfg, path.stem)
-        raise FloorplanError(f"{path}: unknown floorplan format '{path.suffix}' (expected .yaml/.yml or an image: {', '.join(IMAGE_SUFFIXES)})")
+        raise FloorplanError(f"{path}: unknown floorplan format '{path.suffix}' (expected a ROS map .yaml/.yml, an image ({', '.join(IMAGE_SUFFIXES)}) with --resolution and --origin, or a DXF/SVG/GeoJSON drawing (.dxf, .svg, .geojson/.json))")
 
     @classmethod
     def _load_ros(cls, path: Path, settings: Settings | None) -> Floorplan:

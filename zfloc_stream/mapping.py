@@ -31,14 +31,15 @@ def _included(n_scans: int, exclude: Seq[tuple[int, int]]) -> np.ndarray:
     return keep
 
 
-def parse_exclude(text: str) -> tuple[int, int]:
-    """'A:B' -> (A, B): scans A (included) to B (excluded), 0-based, in file order."""
+def parse_exclude(text: str, option: str = "--exclude") -> tuple[int, int]:
+    """'A:B' -> (A, B): scans A (included) to B (excluded), 0-based, in file order (also
+    `run --scans`, the window such a held-out map leaves out)."""
     try:
         a, b = (int(v) for v in text.split(":"))
     except ValueError:
-        raise InputError(f"--exclude '{text}' must look like START:STOP (scan indices, STOP excluded)") from None
+        raise InputError(f"{option} '{text}' must look like START:STOP (scan indices, STOP excluded)") from None
     if a < 0 or b <= a:
-        raise InputError(f"--exclude '{text}': need 0 <= START < STOP")
+        raise InputError(f"{option} '{text}': need 0 <= START < STOP")
     return a, b
 
 

@@ -1,4 +1,8 @@
-"""The qualitative figure: floorplan, aligned BEV, true and estimated trajectories."""
+"""The qualitative figure: floorplan, aligned BEV, true and estimated trajectories.
+
+The estimated path is coloured by the localizer's status at each frame (a stretch the
+tracker called ambiguous or lost reads as such), the start of each path has a marker,
+and every marker drawn has its legend entry."""
 
 from __future__ import annotations
 
@@ -14,16 +18,32 @@ from .floorplan import Floorplan  # noqa: E402
 from .sim2 import Sim2  # noqa: E402
 
 
-def save_overlay(
-    path: str | Path,
+STATUS_COLOURS = {"initializing": "tab:gray", "tracking": "tab:green", "ambiguous": "tab:purple", "lost": "tab:red"}
+
+
+def save_overlay(path: str | Path, floorplan: Floorplan, estimated: np.ndarray, truth: np.ndarray | None = None, **kwargs) -> Path:
+    """The figure of overlay_figure written to path (PNG)."""
+    fig = overlay_figure(floorplan, estimated, truth, **kwargs)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def overlay_figure(
     floorplan: Floorplan,
     estimated: np.ndarray,
     truth: np.ndarray | None = None,
     bev_wall_points: np.ndarray | None = None,
     alignment: Sim2 | None = None,
     title: str = "",
-) -> Path:
-    """estimated / truth: (N, 3) poses in the floorplan (rows of NaN where none)."""
+    statuses: list[str] | None = None,
+):
+    """estimated / truth: (N, 3) poses in the floorplan (rows of NaN where none); statuses:
+    the status of each estimated frame (the path's colours; one colour without them)."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
     x0, y0 = floorplan.origin
     h, w = floorplan.occupied.shape
     res = floorplan.resolution
@@ -37,25 +57,45 @@ def save_overlay(
         extent=(x0, x0 + w * res, y0, y0 + h * res),
         interpolation="nearest",
     )
+    handles = []
     if bev_wall_points is not None and alignment is not None and len(bev_wall_points):
         aligned = alignment.apply(bev_wall_points)
-        ax.scatter(aligned[:, 0], aligned[:, 1], s=1.5, c="tab:orange", label="BEV walls (aligned)", lw=0)
-    if truth is not None and len(truth):
-        ax.plot(truth[:, 0], truth[:, 1], "-", c="tab:blue", lw=2, label="ground truth")
-        ax.plot(truth[-1, 0], truth[-1, 1], "o", c="tab:blue")
+        ax.scatter(aligned[:, 0], aligned[:, 1], s=1.5, c="tab:orange", lw=0)
+        handles.append(Line2D([], [], ls="", marker="o", ms=3, c="tab:orange", label="BEV walls (aligned, last frame)"))
+    if truth is not None and np.isfinite(truth[:, :2]).any():
+        known = truth[np.isfinite(truth[:, :2]).all(axis=1)]
+        ax.plot(known[:, 0], known[:, 1], "-", c="tab:blue", lw=2)
+        handles.append(Line2D([], [], c="tab:blue", lw=2, label="ground truth"))
+        ax.plot(known[0, 0], known[0, 1], "s", c="tab:blue", mfc="white", ms=8, mew=2)
+        handles.append(Line2D([], [], ls="", marker="s", c="tab:blue", mfc="white", ms=8, mew=2, label="ground truth start"))
+        ax.plot(known[-1, 0], known[-1, 1], "o", c="tab:blue", ms=7)
+        handles.append(Line2D([], [], ls="", marker="o", c="tab:blue", ms=7, label="ground truth end"))
     est = np.asarray(estimated, dtype=float).reshape(-1, 3)
-    if np.isfinite(est).any():
-        ax.plot(est[:, 0], est[:, 1], "-", c="tab:green", lw=1.5, label="estimate")
-        last = est[np.isfinite(est[:, 0])][-1]
-        ax.arrow(last[0], last[1], 0.8 * np.cos(last[2]), 0.8 * np.sin(last[2]), color="tab:green", width=0.08)
+    posed = np.isfinite(est).all(axis=1)
+    if posed.any():
+        idx = np.flatnonzero(posed)
+        status = list(statuses) if statuses is not None and len(statuses) == len(est) else ["tracking"] * len(est)
+        # One segment per pair of consecutive posed frames, in the colour of the later frame's status.
+        segments = [est[[a, b], :2] for a, b in zip(idx[:-1], idx[1:])]
+        colours = [STATUS_COLOURS.get(status[b], "tab:green") for b in idx[1:]]
+        if segments:
+            ax.add_collection(LineCollection(segments, colors=colours, linewidths=1.8))
+        shown = [s for s in STATUS_COLOURS if any(status[i] == s for i in idx)] if statuses is not None else []
+        for s in shown:
+            handles.append(Line2D([], [], c=STATUS_COLOURS[s], lw=1.8, label=f"estimate ({s})"))
+        if not shown:
+            handles.append(Line2D([], [], c="tab:green", lw=1.8, label="estimate"))
+        first, last = est[idx[0]], est[idx[-1]]
+        ax.plot(first[0], first[1], "^", c="black", mfc="yellow", ms=9)
+        handles.append(Line2D([], [], ls="", marker="^", c="black", mfc="yellow", ms=9, label="estimate start (first pose)"))
+        ax.arrow(last[0], last[1], 0.8 * np.cos(last[2]), 0.8 * np.sin(last[2]), color="black", width=0.08)
+        handles.append(Line2D([], [], ls="", marker=r"$\rightarrow$", c="black", ms=12, label="final estimated pose and heading"))
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")
-    ax.legend(loc="upper right", fontsize=8)
+    if handles:
+        ax.legend(handles=handles, loc="upper right", fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig

@@ -241,7 +241,7 @@ def run_study(
 ) -> StudyOutcome:
     """Plan, run the unfinished cells (workers=0: in this process, no dask), write the
     outputs. Returns the sorted rows and the summary."""
-    from tqdm import tqdm
+    from .tools.cli_support import Progress
 
     overrides = overrides or {}
     settings = load_settings(overrides=overrides)
@@ -258,7 +258,8 @@ def run_study(
         raise InputError(f"no chunk of {min(lengths)} frames fits in {', '.join(datasets)}")
     finished = load_finished(out)
     todo = [c for c in cells if finished.get(c.key, {}).get("error", "x") is not None]
-    bar = tqdm(total=len(cells), initial=len(cells) - len(todo), disable=not progress, unit="chunk", desc="study")
+    bar = Progress(len(cells), "study", "chunk", enabled=progress)
+    bar.update(len(cells) - len(todo))
     t0 = time.perf_counter()
     with open(out / CELLS_FILE, "a") as sink:
 
@@ -308,7 +309,8 @@ def _spread(values) -> dict:
     v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
     if v.size == 0:
         return {"mean": float("nan"), "std": float("nan")}
-    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if v.size > 1 else 0.0}
+    # one seed has no spread: NaN, so the table prints the value alone, not "± 0.0"
+    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if v.size > 1 else float("nan")}
 
 
 def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
@@ -353,29 +355,33 @@ def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
 def _pct(stat: dict) -> str:
     if not np.isfinite(stat["mean"]):
         return "--"
-    return f"{100 * stat['mean']:.1f} ± {100 * stat['std']:.1f}"
+    spread = f" ± {100 * stat['std']:.1f}" if np.isfinite(stat["std"]) else ""
+    return f"{100 * stat['mean']:.1f}{spread}"
 
 
 def _metres(stat: dict) -> str:
     if not np.isfinite(stat["mean"]):
         return "--"
-    return f"{stat['mean']:.2f} ± {stat['std']:.2f}"
+    spread = f" ± {stat['std']:.2f}" if np.isfinite(stat["std"]) else ""
+    return f"{stat['mean']:.2f}{spread}"
 
 
 def markdown_table(summary: list[dict], lengths: Sequence[int], thresholds: Sequence[float]) -> str:
-    """Paper-shaped: per dataset, the longest length's SR@1m / RMSE_succ / RMSE_all, then
-    SR@1m at each shorter length; a second table gives SR at every threshold and length."""
+    """Per dataset: SR@1m at every length, longest first, then RMSE_succ and RMSE_all at
+    the longest (the paper's numbers, with each column's length in its name, so the columns
+    read in order); a second table gives SR at every threshold and length. Mean ± sample
+    std over seeds; with one seed the value alone."""
     lengths = sorted(lengths, reverse=True)
-    longest, shorter = lengths[0], lengths[1:]
+    longest = lengths[0]
     ref = f"{REFERENCE_THRESHOLD:g}" if REFERENCE_THRESHOLD in thresholds else f"{thresholds[0]:g}"
     by = {(s["dataset"], s["length"]): s for s in summary}
     datasets = list(dict.fromkeys(s["dataset"] for s in summary))
-    head = [f"#{longest} SR@{ref}m (%)", "RMSE_succ (m)", "RMSE_all (m)"] + [f"SR@{ref}m #{L} (%)" for L in shorter]
+    head = [f"SR@{ref}m #{L} (%)" for L in lengths] + [f"RMSE_succ #{longest} (m)", f"RMSE_all #{longest} (m)"]
     lines = ["| Dataset | " + " | ".join(head) + " |", "|---" * (len(head) + 1) + "|"]
     for d in datasets:
+        cells = [_pct(by[(d, L)]["success_rate"][ref]) if (d, L) in by else "--" for L in lengths]
         s = by.get((d, longest))
-        cells = ["--"] * 3 if s is None else [_pct(s["success_rate"][ref]), _metres(s["rmse_succ"]), _metres(s["rmse_all"])]
-        cells += [_pct(by[(d, L)]["success_rate"][ref]) if (d, L) in by else "--" for L in shorter]
+        cells += ["--"] * 2 if s is None else [_metres(s["rmse_succ"]), _metres(s["rmse_all"])]
         lines.append(f"| {dataset_label(d)} | " + " | ".join(cells) + " |")
     lines += ["", "| Dataset | length | runs | " + " | ".join(f"SR@{t:g}m (%)" for t in thresholds) + " | no pose | errors |"]
     lines.append("|---" * (len(thresholds) + 5) + "|")
@@ -397,19 +403,30 @@ def plot_sr_vs_length(summary: list[dict], thresholds: Sequence[float], path: Pa
 
     fig, ax = plt.subplots(figsize=(6, 4))
     datasets = list(dict.fromkeys(s["dataset"] for s in summary))
+    all_lengths = sorted({s["length"] for s in summary})
+    # Thresholds often give the same SR (every success within 0.5 m): each (dataset,
+    # threshold) line gets its own colour, marker and line style, and a small sideways
+    # offset, so coinciding lines stay visible side by side.
+    width = (all_lengths[-1] - all_lengths[0]) if len(all_lengths) > 1 else 10.0
+    n_lines = max(1, len(datasets) * len(thresholds))
+    styles = ("-o", "--s", ":^", "-.v", "-D", "--P")
     for i, d in enumerate(datasets):
         rows = sorted((s for s in summary if s["dataset"] == d), key=lambda s: s["length"])
-        x = [s["length"] for s in rows]
-        for t, style in zip(thresholds, ("-o", "--s", ":^", "-.v")):
+        for j, t in enumerate(thresholds):
+            k = i * len(thresholds) + j
+            dodge = (k - (n_lines - 1) / 2) * 0.012 * width
+            x = [s["length"] + dodge for s in rows]
             mean = [100 * s["success_rate"][f"{t:g}"]["mean"] for s in rows]
             std = [100 * s["success_rate"][f"{t:g}"]["std"] for s in rows]
-            ax.errorbar(x, mean, yerr=std, fmt=style, color=f"C{i}", capsize=3, label=f"{dataset_label(d)} @{t:g} m")
+            std = [v if np.isfinite(v) else 0.0 for v in std]
+            ax.errorbar(x, mean, yerr=std, fmt=styles[j % len(styles)], color=f"C{k % 10}", capsize=3, mfc="none" if j else None,
+                        label=f"{dataset_label(d)} @{t:g} m")
     ax.set_xlabel("sequence length (frames)")
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    ax.set_title("SR vs sequence length (mean ± std over seeds)")
+    ax.set_title("SR vs sequence length (mean ± std over seeds; lines offset sideways)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

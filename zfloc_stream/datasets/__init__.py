@@ -61,7 +61,11 @@ def detect_source(
     if path.is_dir():
         if gibson.is_scene_dir(path):
             return gibson.scene_sequence(path, settings, floorplan=floorplan, odometry_noise=odometry_noise)
-        raise InputError(f"{path} is a folder but not a Gibson(t) scene (needs {', '.join(gibson.SCENE_FILES)})")
+        sessions = sorted(path.glob("*.mcap"))
+        if sessions:  # a session folder (session.mcap + map.yaml + gt.csv): name the file
+            raise InputError(f"{path} is a folder: give the session file itself: --input {sessions[0]}")
+        raise InputError(f"{path} is a folder but not a Gibson(t) scene (needs {', '.join(gibson.SCENE_FILES)}) "
+                         "and holds no session .mcap")
     head = _head(path)
     if head.startswith(MCAP_MAGIC) and ros2.is_ros2_mcap(path):
         return ros2.bag_sequence(path, settings, floorplan=floorplan, topics=topics)

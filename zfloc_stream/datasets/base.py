@@ -60,6 +60,7 @@ class Sequence:
         self._window_floorplan = window_floorplan
         self.source = source
         self.needs_depth_network = needs_depth_network
+        self.topics: dict[str, str] = {}  # role -> topic read, for the sources that have topics
 
     @property
     def ground_truth(self) -> np.ndarray:

@@ -55,7 +55,7 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
             return Floorplan.load(sibling, settings=settings)
         raise InputError(f"{path} carries no floorplan and there is no {SIBLING_FLOORPLAN} beside it: pass --floorplan")
 
-    return Sequence(
+    sequence = Sequence(
         name=path.stem if path.stem != "session" else path.parent.name,
         frame_source=frames,
         n_frames=len(truth),
@@ -65,6 +65,10 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
         source=f"mcap:{path}",
         needs_depth_network=rgb_only,
     )
+    from ..session.schemas import INPUT_TOPICS
+
+    sequence.topics = {t.rsplit("/", 1)[-1]: t for t in INPUT_TOPICS if session.topics is None or t in session.topics}
+    return sequence
 
 
 @register("mcap")

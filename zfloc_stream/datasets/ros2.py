@@ -319,6 +319,7 @@ def bag_sequence(path, settings: Settings, floorplan=None, topics: dict[str, str
         source=f"ros2:{bag.path}",
     )
     seq.skipped = bag.skipped
+    seq.topics = dict(bag.topics)  # role -> topic, as found or given (run prints them)
     return seq
 
 

@@ -88,8 +88,11 @@ def _truth_msg(index: int, truth, ns: int, heading_axis: str):
 class SessionWriter:
     """Writes one session file. Use as a context manager (or call close())."""
 
-    def __init__(self, path: str | Path, settings: Settings, floorplan=None, metadata: dict[str, str] | None = None):
+    def __init__(self, path: str | Path, settings: Settings, floorplan=None, metadata: dict[str, str] | None = None,
+                 listeners=()):
+        """listeners: callables given each batch of records as it is written (the live view)."""
         self.path = Path(path)
+        self._listeners = tuple(listeners)
         self.settings = settings
         self._cfg = settings.logging
         try:
@@ -223,6 +226,8 @@ class SessionWriter:
     def _submit(self) -> None:
         batch, self._batch = self._batch, []
         close, self._close_chunk_first = self._close_chunk_first, False
+        for listener in self._listeners:
+            listener(batch)
         try:
             self._sink.submit(batch, close)
         except OSError as err:

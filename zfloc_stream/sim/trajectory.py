@@ -83,12 +83,17 @@ def _plan_grid(scene, ws: WalkSettings) -> _PlanGrid:
     return out
 
 
+def _xy(point) -> str:
+    """'(4.32, 4.78)': plain numbers in messages, not numpy reprs."""
+    return "({:.2f}, {:.2f})".format(*(float(v) for v in np.asarray(point, dtype=float)[:2]))
+
+
 def _nearest_node(pg: _PlanGrid, point) -> int:
     rc = np.floor((np.asarray(point, dtype=float) - pg.origin)[::-1] / _PLAN_RES).astype(int)
     d = np.abs(pg.cells - rc).max(axis=1)
     k = int(np.argmin(d))
     if d[k] > 10:  # more than a metre from any walkable cell
-        raise InputError(f"point {tuple(np.round(point, 2))} is not in the walkable space")
+        raise InputError(f"point {_xy(point)} is not in the walkable space")
     return k
 
 
@@ -99,7 +104,11 @@ def plan_path(scene, start, goal, ws: WalkSettings = WalkSettings()) -> np.ndarr
     a, b = _nearest_node(pg, start), _nearest_node(pg, goal)
     dist, pred = dijkstra(pg.graph, indices=a, return_predecessors=True)
     if not np.isfinite(dist[b]):
-        raise InputError(f"no walkable path from {tuple(np.round(start, 2))} to {tuple(np.round(goal, 2))}")
+        raise InputError(
+            f"no walkable path from {_xy(start)} to {_xy(goal)}: openings need a clear width of at least "
+            f"{2 * ws.clearance:.1f} m (walk clearance {ws.clearance:g} m each side): check the drawing's scale "
+            "(--scale M_PER_UNIT) or widen the openings in the plan"
+        )
     chain = [b]
     while chain[-1] != a:
         chain.append(pred[chain[-1]])

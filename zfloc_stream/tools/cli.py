@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..config import dump_settings, load_settings
-from ..errors import ZflocError
+from ..errors import InputError, ZflocError
+from .cli_support import CliParser, install_warning_format, prepare_out_dir, print_warning
 
 EPILOG = """examples:
   zfloc-stream demo                                   # apartment scene, seed 0, into ./zfloc-demo
@@ -15,11 +15,14 @@ EPILOG = """examples:
   zfloc-stream run --floorplan map.yaml --input session.mcap --out out/
   zfloc-stream run --floorplan map.yaml --input intel.log.gz --odometry-noise 0.02 --out out/
   zfloc-stream run --floorplan plan.dxf --input robot.mcap --topic scan=/front/scan --out out/   # a ROS 2 bag
+  zfloc-stream run --floorplan map.yaml --input robot.mcap --groundtruth gt.tum --ros2 --out out/   # + errors, ROS 2 messages
+  zfloc-stream run --input session.mcap --live 8765 --out out/   # watch it in Foxglove (ws://127.0.0.1:8765)
   zfloc-stream demo --floorplan plan.dxf              # a simulated walk through your own building
   zfloc-stream export out/session.mcap --tum out.txt  # the logged trajectory for evo
   zfloc-stream run --input phone.mcap --depth-model depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf \
       --seg-model nvidia/segformer-b0-finetuned-ade-512-512 --out out/     # plain RGB camera ([torch] extra)
   zfloc-stream map-from-log intel.log.gz --exclude 375:454 --out held-out-map/
+  zfloc-stream run --floorplan held-out-map/map.yaml --input intel.log.gz --scans 375:454 --out out/
   zfloc-stream config > my.yaml                       # the default settings, to edit
 """
 
@@ -35,6 +38,10 @@ def _add_floorplan_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--layers", help="DXF plans: comma-separated layers to use (default all)")
     p.add_argument("--skip-layers", help="DXF plans: comma-separated layers to leave out (furniture, text, ...)")
     p.add_argument("--tum", type=Path, metavar="PATH", help="also write the trajectory as a TUM file for evo (default OUT/trajectory.tum)")
+    p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
+                   help="serve the session's topics live to Foxglove on ws://127.0.0.1:PORT (default 8765; the [live] extra)")
+    p.add_argument("--ros2", action="store_true", help="also write OUT/ros2.mcap: ROS 2 messages (PoseStamped /zfloc/pose, "
+                   "map->odom on /tf, OccupancyGrid /zfloc/floorplan, /zfloc/groundtruth) for ROS tools and evo")
 
 
 def _split(text: str | None) -> list[str] | None:
@@ -54,7 +61,7 @@ def load_floorplan(args, settings):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CliParser(
         prog="zfloc-stream",
         description="Online zero-shot floorplan localization.",
         epilog=EPILOG,
@@ -86,7 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Localize a recorded session (MCAP session, ROS 2 bag, Gibson(t) scene folder or Carmen log, detected by content) "
         "against a floorplan. Writes trajectory.csv, trajectory.tum, overlay.png and session.mcap.",
         epilog="examples:\n  zfloc-stream run --floorplan map.yaml --input session.mcap --out out/\n"
-        "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/",
+        "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/\n"
+        "  zfloc-stream run --floorplan map.yaml --input run.mcap --groundtruth gt.csv --scans 0:200 --ros2 --out out/\n"
+        "  zfloc-stream run --input session.mcap --live --out out/          # open ws://127.0.0.1:8765 in Foxglove",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument("--floorplan", type=Path, help="ROS map_server YAML, an image with --resolution and --origin, or a "
@@ -94,6 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--resolution", type=float, help="metres per pixel of an image floorplan")
     run.add_argument("--origin", type=float, nargs=2, metavar=("X", "Y"), help="metric position of the image's lower-left corner")
     run.add_argument("--input", type=Path, required=True, help="session.mcap, a ROS 2 bag (.mcap), a Gibson(t) scene folder, or a Carmen log")
+    run.add_argument("--groundtruth", type=Path, metavar="FILE", help="ground truth for any input: a TUM file (matched by "
+                     "timestamp) or a CSV with x,y,theta columns (+ frame or timestamp; else one row per input frame); "
+                     "replaces the input's own")
+    run.add_argument("--scans", metavar="START:STOP", help="localize input frames [START, STOP) only (0-based; for a Carmen "
+                     "log the scans map-from-log --exclude START:STOP leaves out)")
     run.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
                      help="ROS 2 bags: the topic for a role (scan, depth, camera_info, odom, tf, tf_static), e.g. scan=/front/scan")
     run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
@@ -126,6 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def load_settings(*args, **kwargs):
+    """config.load_settings, imported on first use (pydantic is not needed for --help)."""
+    from ..config import load_settings as load
+
+    return load(*args, **kwargs)
+
+
 def _settings(args):
     return load_settings(args.config, args.set)
 
@@ -140,13 +161,24 @@ def _run_settings(args, base_overrides: dict | None = None):
     return settings.model_copy(update={"backbones": settings.backbones.model_copy(update=models)})
 
 
+def _start_live(args):
+    if args.live is None:
+        return None
+    from .live import LiveServer
+
+    server = LiveServer(args.live)
+    print(f"live view: {server.url} (Foxglove: Open connection -> Foxglove WebSocket)", flush=True)
+    return server
+
+
 def cmd_demo(args) -> int:
+    if args.frames < 1:
+        raise InputError("--frames must be at least 1")
+    prepare_out_dir(args.out, create=False)
     from ..sim import SimSettings, build_scene, simulate
     from .session_runner import run_session
 
     settings = load_settings(args.config, args.set, base_overrides={"seed": args.seed})
-    if args.frames < 1:
-        raise ZflocError("--frames must be at least 1")
     if args.floorplan is not None:
         from ..sim import build_scene_from_floorplan
 
@@ -154,15 +186,32 @@ def cmd_demo(args) -> int:
     else:
         scene = build_scene(args.scene, seed=args.seed)
     sequence = simulate(scene, SimSettings(), seed=args.seed, n_frames=args.frames)
-    outcome = run_session(
-        scene.floorplan, iter(sequence), settings, args.out, total=args.frames,
-        progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum,
-    )
-    _report(outcome)
+    live = _start_live(args)
+    try:
+        outcome = run_session(
+            scene.floorplan, iter(sequence), settings, args.out, total=args.frames,
+            progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum, live=live, ros2=args.ros2,
+        )
+    finally:
+        if live is not None:
+            live.close()
+    _report(outcome, settings)
     return 0
 
 
+def _topics_line(args, sequence) -> str:
+    kind, _, _ = sequence.source.partition(":")
+    names = {"mcap": "MCAP session", "ros2": "ROS 2 bag", "carmen": "Carmen log", "gibson": "Gibson(t) scene"}
+    text = f"input: {names.get(kind, kind)} {args.input}"
+    topics = getattr(sequence, "topics", None)
+    if topics:
+        # a bag's topics are found by type: say which role each one plays
+        text += "; topics: " + ", ".join(topic if kind == "mcap" else f"{role}={topic}" for role, topic in topics.items())
+    return text
+
+
 def cmd_run(args) -> int:
+    prepare_out_dir(args.out, create=False)
     from ..backbones import Perception
     from ..datasets import detect_source
     from ..datasets.ros2 import parse_topic_overrides
@@ -170,6 +219,16 @@ def cmd_run(args) -> int:
 
     settings = _run_settings(args)
     topics = parse_topic_overrides(args.topic)
+    window = None
+    if args.scans is not None:
+        from ..mapping import parse_exclude
+
+        window = parse_exclude(args.scans, "--scans")
+    groundtruth = None
+    if args.groundtruth is not None:
+        from ..groundtruth import load_groundtruth
+
+        groundtruth = load_groundtruth(args.groundtruth, max_gap=settings.datasets.ros2.max_odometry_gap)
     floorplan = None
     if args.floorplan is not None:
         floorplan = load_floorplan(args, settings)
@@ -177,44 +236,92 @@ def cmd_run(args) -> int:
                              settings=settings, topics=topics)
     if sequence.settings_overrides:
         settings = _run_settings(args, sequence.settings_overrides)
+    start, stop = 0, sequence.n_frames
+    if window is not None:
+        start, stop = window
+        if start >= sequence.n_frames:
+            raise InputError(f"--scans {args.scans}: {args.input} has only {sequence.n_frames} frames")
+        stop = min(stop, sequence.n_frames)
+    print(_topics_line(args, sequence) + (f"; frames {start}-{stop - 1} of {sequence.n_frames}" if window else f"; {sequence.n_frames} frames"), flush=True)
     if floorplan is None and sequence.source.startswith("carmen:"):
-        print(
-            "zfloc-stream: WARNING: no --floorplan: the map is built from this log's own scans, "
-            "the very scans being localized (a self-test, not a result). For a fair test build a "
-            "held-out map: zfloc-stream map-from-log LOG --exclude A:B --out DIR",
-            file=sys.stderr,
-        )
+        if window is not None:
+            print_warning(f"no --floorplan: the map is built from this log without scans {start}-{stop - 1} "
+                          "(+- datasets.carmen.heldout_margin), the held-out map of map-from-log --exclude")
+        else:
+            print_warning(
+                "no --floorplan: the map is built from this log's own scans, the very scans being localized "
+                "(a self-test, not a result). For a fair test build a held-out map: "
+                "zfloc-stream map-from-log LOG --exclude A:B --out DIR, then run --scans A:B"
+            )
+    plan = sequence.floorplan_for(start, stop) if window is not None and floorplan is None else sequence.floorplan
     perception = Perception.from_settings(settings.backbones)  # loads now: a bad model fails before any output
     if sequence.needs_depth_network and (perception is None or perception.depth is None):
-        raise ZflocError(f"{args.input} holds RGB camera frames without depth: name a depth network with --depth-model ID_OR_DIR")
-    outcome = run_session(
-        sequence.floorplan, sequence.frames(), settings, args.out, total=sequence.n_frames,
-        progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum, perception=perception,
-    )
-    _report(outcome)
+        raise InputError(f"{args.input} holds RGB camera frames without depth: name a depth network with --depth-model ID_OR_DIR")
+    live = _start_live(args)
+    try:
+        outcome = run_session(
+            plan, sequence.frames(start, stop), settings, args.out, total=stop - start,
+            progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum, perception=perception,
+            groundtruth=groundtruth, first_index=start, live=live, ros2=args.ros2,
+        )
+    finally:
+        if live is not None:
+            live.close()
+    _report(outcome, settings)
     return 0
 
 
-def _report(outcome) -> None:
+def _report(outcome, settings) -> None:
+    import numpy as np
+
+    from ..tum import moved_note
+
     last = outcome.estimates[-1] if outcome.estimates else None
-    print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap ({len(outcome.estimates)} frames); TUM: {outcome.tum_path}")
-    if last is not None:
+    extra = "".join(f", {p.name}" for p in (outcome.truth_tum_path, outcome.ros2_path) if p is not None)
+    print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap{extra} ({len(outcome.estimates)} frames); "
+          f"TUM: {outcome.tum_path} ({outcome.tum_rows} poses)")
+    note = moved_note(outcome.tum_path, outcome.tum_moved, outcome.tum_rows)
+    if note:
+        print(f"note: {note}")
+    if last is None:
+        return
+    if last.pose is None:
+        print(f"final status: {last.status}, no pose yet ({len(outcome.estimates)} frames: too few for a first estimate)")
+    else:
         print(f"final status: {last.status}, score {last.score:.3f}, scale {last.scale:.3f}")
+    threshold = settings.logging.success_distance
+    summary = outcome.error_summary(threshold)
+    if summary is None:
+        return
+    if summary.posed:
+        print(f"position error over {summary.posed} posed frames with ground truth: mean {summary.mean:.2f} m, "
+              f"median {summary.median:.2f} m, max {summary.max:.2f} m; {summary.off} frames more than {threshold:g} m off"
+              + (f"; {summary.frames - summary.posed} frames without a pose" if summary.frames > summary.posed else ""))
+    else:
+        print(f"position error: no pose yet on any of the {summary.frames} frames with ground truth")
+    print(f"frames within {threshold:g} m by status: " + ", ".join(f"{status} {k}/{n}" for status, (k, n) in summary.by_status.items()))
     errors = outcome.final_errors()
-    if errors is not None and len(errors):
-        ok = bool((errors <= 1.0).all())
-        print(f"final position error: {errors[-1]:.3f} m; last-10 max {errors.max():.3f} m; success@1m: {'yes' if ok else 'no'}")
+    if errors is not None and last.pose is not None:
+        ok = bool((errors <= threshold).all())
+        missing = int((~np.isfinite(errors)).sum())
+        tail = f"last-{len(errors)} max {errors.max():.3f} m" if not missing else f"{missing} of the last {len(errors)} frames without a pose"
+        print(f"final position error: {errors[-1]:.3f} m; {tail}; success@{threshold:g}m: {'yes' if ok else 'no'}")
 
 
 def cmd_export(args) -> int:
-    from ..tum import export_session_tum
+    from ..tum import export_session_tum, moved_note
 
-    rows = export_session_tum(args.session, args.tum)
-    print(f"wrote {args.tum} ({rows} poses)")
+    out = export_session_tum(args.session, args.tum)
+    print(f"wrote {args.tum} ({out.rows} poses)")
+    note = moved_note(args.tum, out.moved, out.rows)
+    if note:
+        print(f"note: {note}")
     return 0
 
 
 def cmd_config(args) -> int:
+    from ..config import dump_settings
+
     sys.stdout.write(dump_settings(_settings(args)))
     return 0
 
@@ -222,6 +329,7 @@ def cmd_config(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    install_warning_format()
     try:
         if args.command == "demo":
             return cmd_demo(args)
@@ -233,11 +341,16 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_export(args)
         return args.func(args)
     except ZflocError as err:
-        print(f"zfloc-stream: error: {err}", file=sys.stderr)
+        print(f"zfloc-stream: error: {' '.join(str(err).split()) or type(err).__name__}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("zfloc-stream: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into e.g. head: not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

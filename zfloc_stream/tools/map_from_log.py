@@ -7,10 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..config import load_settings
-from ..datasets.carmen import read_carmen
 from ..errors import InputError
-from ..mapping import map_from_log, parse_exclude
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -37,6 +34,11 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
+    # imported here, not at the top: `zfloc-stream --help` builds this parser and must stay fast
+    from ..config import load_settings
+    from ..datasets.carmen import read_carmen
+    from ..mapping import map_from_log, parse_exclude
+
     settings = load_settings(args.config, args.set)
     exclude = [parse_exclude(text) for text in args.exclude]
     if not args.name or "/" in args.name:

@@ -14,11 +14,12 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, SessionLogError, ZflocError
+from .cli_support import CliParser, Progress, install_warning_format
 
 EPILOG = """examples:
   zfloc-replay session.mcap --check               # same decisions, numbers within tolerance? exit 0, else 1 + first divergence
   zfloc-replay session.mcap --exact               # bit for bit (on the machine that recorded it)
-  zfloc-replay session.mcap --check --set replay.rtol=1e-6   # a looser tolerance
+  zfloc-replay session.mcap --check --set replay.rtol=1e-4   # a looser tolerance (default 1e-5)
   zfloc-replay session.mcap --check --from 20 --to 40
   zfloc-replay session.mcap --set estimator.ransac.iterations=200 --out fewer-iters.mcap
   zfloc-replay session.mcap --config tuned.yaml   # side-by-side summary, new session in ./session-replay.mcap
@@ -28,7 +29,7 @@ EPILOG = """examples:
 --check compares decisions exactly (frame count, statuses, reported mode and the order of
 the alternatives, number of hypotheses, skipped frames and their reasons, which outputs
 exist) and numbers (poses, covariances, alignments, scores, weights, BEV log-odds) within
-replay.rtol / replay.atol (defaults 1e-7 / 1e-8): another CPU or BLAS may change their last
+replay.rtol / replay.atol (defaults 1e-5 / 1e-6): another CPU or BLAS may change their last
 bits. It prints the largest deviation per topic, and says when the session was recorded
 in another environment (versions, BLAS, SIMD features, CPU).
 
@@ -39,13 +40,8 @@ starts at frame N.
 """
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, exit 2 (argparse would print usage too)
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = CliParser(
         prog="zfloc-replay",
         description="Re-run the localizer on the inputs logged in a session file (MCAP): check that it "
         "reproduces the logged outputs bit for bit, or compare a run with changed settings.",
@@ -130,19 +126,14 @@ def run(args) -> int:
     if out is not None and out.resolve() == args.session.resolve():
         raise InputError(f"--out {out} would overwrite the session being replayed")
 
-    progress = None
-    if not args.no_progress and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        progress = tqdm(desc="replaying", unit="frame", file=sys.stderr)
+    progress = Progress(None, "replaying", "frame", enabled=not args.no_progress)
     try:
         result = replay_session(
             session, settings, floorplan, start=args.start, stop=args.stop, check=args.check, out=out,
-            on_frame=None if progress is None else (lambda _i: progress.update(1)), tolerance=tolerance,
+            on_frame=lambda _i: progress.update(1), tolerance=tolerance,
         )
     finally:
-        if progress is not None:
-            progress.close()
+        progress.close()
 
     for note in session.problems[:5]:
         print(f"note: {note}", file=sys.stderr)
@@ -173,6 +164,7 @@ def run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    install_warning_format()
     try:
         return run(args)
     except ZflocError as err:

@@ -1,44 +1,94 @@
-"""Runs the localizer over a frame source and writes the session's outputs:
-trajectory.csv, session.mcap and overlay.png in one output folder."""
+"""Runs the localizer over a frame source and writes the session's outputs in one folder:
+trajectory.csv, trajectory.tum (+ groundtruth.tum where the truth is known), session.mcap
+and overlay.png; optionally ros2.mcap (ROS 2 messages) and a live Foxglove view."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..config import Settings
-from ..estimate import Estimate
+from ..errors import InputError
+from ..estimate import STATUSES, Estimate
 from ..floorplan import Floorplan
 from ..localizer import Localizer
 from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
-from ..tum import TumWriter
+from ..tum import TumStamps, TumWriter
+from .cli_support import Progress, prepare_out_dir
 
 TUM_NAME = "trajectory.tum"  # beside trajectory.csv unless --tum names another path
+TRUTH_TUM_NAME = "groundtruth.tum"  # the reference for evo_ape, same stamps as trajectory.tum
+ROS2_NAME = "ros2.mcap"
+
+
+@dataclass
+class ErrorSummary:
+    """Position errors of the frames whose truth is known (threshold: success distance)."""
+
+    threshold: float
+    frames: int  # frames with ground truth
+    posed: int  # of those, frames with a pose
+    mean: float
+    median: float
+    max: float
+    off: int  # posed frames farther than the threshold
+    by_status: dict[str, tuple[int, int]]  # status -> (frames within the threshold, frames)
 
 
 @dataclass
 class SessionOutcome:
     estimates: list[Estimate]
-    truth: np.ndarray | None  # (N, 3) where every frame had ground truth
+    truth: np.ndarray | None  # (N, 3), NaN rows where a frame's truth is unknown; None: no frame had one
     out_dir: Path
     tum_path: Path | None = None
+    tum_rows: int = 0
+    tum_moved: int = 0  # rows written at a moved stamp (repeated input stamps)
+    truth_tum_path: Path | None = None
+    ros2_path: Path | None = None
 
     @property
     def poses(self) -> np.ndarray:
         return np.array([e.pose if e.pose is not None else (np.nan,) * 3 for e in self.estimates]).reshape(-1, 3)
 
-    def final_errors(self, last: int = 10) -> np.ndarray | None:
-        """Position errors over the last frames (inf where no pose), None without truth."""
+    def errors(self) -> np.ndarray | None:
+        """Per frame: position error (inf where no pose, NaN where no truth); None without truth."""
         if self.truth is None:
             return None
-        err = np.linalg.norm(self.poses[-last:, :2] - self.truth[-last:, :2], axis=1)
-        return np.where(np.isfinite(err), err, np.inf)
+        err = np.linalg.norm(self.poses[:, :2] - self.truth[:, :2], axis=1)
+        known = np.isfinite(self.truth[:, :2]).all(axis=1)
+        return np.where(known, np.where(np.isfinite(err), err, np.inf), np.nan)
+
+    def final_errors(self, last: int = 10) -> np.ndarray | None:
+        """Position errors over the last frames (inf where no pose); None unless every one
+        of them has ground truth."""
+        errors = self.errors()
+        if errors is None or not len(errors) or np.isnan(errors[-last:]).any():
+            return None
+        return errors[-last:]
+
+    def error_summary(self, threshold: float) -> ErrorSummary | None:
+        errors = self.errors()
+        if errors is None:
+            return None
+        known = ~np.isnan(errors)
+        if not known.any():
+            return None
+        posed = errors[known & np.isfinite(errors)]
+        by_status = {}
+        statuses = np.array([e.status for e in self.estimates])
+        for status in STATUSES:
+            mask = known & (statuses == status)
+            if mask.any():
+                by_status[status] = (int((errors[mask] <= threshold).sum()), int(mask.sum()))
+        stat = (lambda f: float(f(posed))) if posed.size else (lambda f: float("nan"))
+        return ErrorSummary(threshold, int(known.sum()), int(posed.size), stat(np.mean), stat(np.median), stat(np.max),
+                            int((posed > threshold).sum()), by_status)
 
 
 def run_session(
@@ -51,32 +101,60 @@ def run_session(
     description: str = "localizing",
     tum: str | Path | None = None,
     perception=None,
+    groundtruth=None,
+    first_index: int = 0,
+    live=None,
+    ros2: bool = False,
 ) -> SessionOutcome:
     """perception: networks that complete RGB camera frames before they are logged, so the
-    session holds their depth and labels and replays without them."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    session holds their depth and labels and replays without them. groundtruth: a
+    groundtruth.GroundTruth that replaces the frames' own truth (looked up at input frame
+    number first_index + i and at the trajectory.tum stamp). live: a tools.live.LiveServer
+    fed every record written to session.mcap. ros2: also write OUT/ros2.mcap."""
+    from contextlib import ExitStack
+
+    out_dir = prepare_out_dir(out_dir)
     localizer = Localizer(floorplan, settings, perception)
     if perception is not None:
         frames = perception.stream(frames)
     estimates: list[Estimate] = []
     truths: list = []
-    with (
-        localizer,  # stops a pipelined round worker, also when a frame source fails
-        TrajectoryCsvWriter(out_dir / "trajectory.csv") as csv_writer,
-        TumWriter(out_dir / TUM_NAME if tum is None else tum) as tum_writer,
-        SessionWriter(out_dir / "session.mcap", settings, floorplan) as log,
-    ):
-        for index, frame in enumerate(tqdm(frames, total=total, desc=description, disable=not progress, unit="frame")):
+    lookup = TumStamps()  # the stamps trajectory.tum will carry: ground truth is looked up at them
+    with ExitStack() as stack:
+        stack.enter_context(localizer)  # stops a pipelined round worker, also when a frame source fails
+        csv_writer = stack.enter_context(TrajectoryCsvWriter(out_dir / "trajectory.csv"))
+        tum_writer = stack.enter_context(TumWriter(out_dir / TUM_NAME if tum is None else tum))
+        truth_writer = stack.enter_context(TumWriter(out_dir / TRUTH_TUM_NAME, header="# timestamp tx ty tz qx qy qz qw (ground truth in the floorplan frame; stamps as in trajectory.tum)\n"))
+        log = stack.enter_context(SessionWriter(out_dir / "session.mcap", settings, floorplan, listeners=() if live is None else (live,)))
+        ros2_writer = None
+        if ros2:
+            from ..ros2_output import Ros2Writer
+
+            ros2_writer = stack.enter_context(Ros2Writer(out_dir / ROS2_NAME, floorplan))
+        bar = stack.enter_context(Progress(total, description, "frame", enabled=progress))
+        for index, frame in enumerate(frames):
+            stamp = lookup.next(frame.timestamp)
+            if groundtruth is not None:
+                frame = dataclasses.replace(frame, ground_truth=groundtruth.at(first_index + index, stamp))
             frame = log.write_frame(index, frame)  # push the frame as logged: replays match bit for bit
             est = localizer.push(frame)
             log.write_estimate(est, localizer)
             csv_writer.write(est)
             tum_writer.write(est)
+            truth_writer.write_pose(est.timestamp, frame.ground_truth)
+            if ros2_writer is not None:
+                ros2_writer.write(stamp, est, frame.ground_truth)
             estimates.append(est)
             truths.append(frame.ground_truth)
-    truth = None if any(t is None for t in truths) or not truths else np.array(truths, dtype=float)
-    outcome = SessionOutcome(estimates, truth, out_dir, tum_writer.path)
+            bar.update()
+    truth = None
+    if any(t is not None for t in truths):
+        truth = np.array([(np.nan,) * 3 if t is None else np.asarray(t, dtype=float)[:3] for t in truths]).reshape(-1, 3)
+    truth_tum = out_dir / TRUTH_TUM_NAME
+    if truth_writer.rows == 0:
+        truth_tum.unlink(missing_ok=True)
+    outcome = SessionOutcome(estimates, truth, out_dir, tum_writer.path, tum_writer.rows, tum_writer.moved,
+                             truth_tum if truth_writer.rows else None, None if ros2_writer is None else ros2_writer.path)
     best = localizer.tracker.best
     obs = localizer.last_observation
     save_overlay(
@@ -87,5 +165,6 @@ def run_session(
         bev_wall_points=None if obs is None else obs.wall_points,
         alignment=None if best is None else best.alignment,
         title=f"{description}: {len(estimates)} frames, final status {estimates[-1].status if estimates else '-'}",
+        statuses=[e.status for e in estimates],
     )
     return outcome

@@ -7,7 +7,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import ZflocError
+from ..errors import InputError, ZflocError
+from .cli_support import CliParser, install_warning_format
 
 EPILOG = """examples:
   zfloc-study --dataset sim:all --lengths 15,20,35,50,100 --seeds 5 --out study-sim/
@@ -23,7 +24,7 @@ Carmen logs are localized against maps built from the log without each window
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = CliParser(
         prog="zfloc-study",
         description="Success rate vs sequence length: cut each sequence into chunks of L frames, localize every "
         "chunk from scratch with each seed, score the last 10 frames (success: all within X m).",
@@ -45,8 +46,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    install_warning_format()
     try:
         from ..study import parse_lengths, run_study, user_overrides
+
+        if args.out.exists() and not args.out.is_dir():
+            raise InputError(f"--out {args.out} is a file, not a folder: name a folder (re-use it to resume)")
 
         lengths = parse_lengths(args.lengths)
         if args.seeds < 1:
@@ -61,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
         )
     except ZflocError as err:
-        print(f"zfloc-study: error: {err}", file=sys.stderr)
+        print(f"zfloc-study: error: {' '.join(str(err).split()) or type(err).__name__}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("zfloc-study: interrupted (finished cells are kept; re-run to resume)", file=sys.stderr)
