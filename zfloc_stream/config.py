@@ -15,6 +15,8 @@ same way: `name: float = Field(default, gt=0, le=10)  # unit, meaning`.
 from __future__ import annotations
 
 import re
+import sys
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -22,6 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
+from .documents import MAX_NESTING, too_deep
 from .errors import ConfigError
 
 SolverName = Literal["3L", "2L", "2C", "LC"]
@@ -30,9 +33,49 @@ ScaleMode = Literal["free", "prior", "fixed"]
 MAX_BEV_HALF_CELLS = 2000
 
 
+def _numeric(annotation) -> bool:
+    """Whether a field (or a list's item) annotation is int or float."""
+    if typing.get_origin(annotation) is Annotated:
+        annotation = typing.get_args(annotation)[0]
+    return annotation in (int, float)
+
+
+def _number_problem(value) -> str | None:
+    """Why a value given for a number setting is not one: pydantic would read True as 1,
+    the text '5' as 5, and a subnormal float (4.9e-324) passes every `gt=0`."""
+    if isinstance(value, bool):
+        return "must be a number, not a boolean (true/false)"
+    if isinstance(value, str):
+        hint = " (YAML 1.1 reads it in base 60)" if ":" in value else " (YAML 1.1 reads it as octal)" if re.fullmatch(r"[-+]?0[0-7_]+", value) else ""
+        return f"must be a number, got text{hint}: write the number itself"
+    if isinstance(value, float) and value != 0 and abs(value) < sys.float_info.min:
+        return f"is a subnormal number (below {sys.float_info.min:.3g}): no setting means anything that small"
+    return None
+
+
 class Section(BaseModel):
     # NaN or infinity is never a usable setting (a NaN threshold silently fails every comparison)
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def numbers_are_numbers(cls, data):
+        """Number settings take numbers only: no booleans, no text, no subnormals."""
+        if not isinstance(data, dict):
+            return data
+        for name, info in cls.model_fields.items():
+            if name not in data:
+                continue
+            value, annotation = data[name], info.annotation
+            if _numeric(annotation):
+                problem = _number_problem(value)
+            elif typing.get_origin(annotation) is list and _numeric(typing.get_args(annotation)[0]) and isinstance(value, list):
+                problem = next((f"item {i} {p}" for i, p in ((i, _number_problem(v)) for i, v in enumerate(value)) if p), None)
+            else:
+                continue
+            if problem is not None:
+                raise section_rule_error(name, value, problem, ())
+        return data
 
 
 def section_rule_error(key: str, value: object, message: str, related: tuple[str, ...]) -> PydanticCustomError:
@@ -574,6 +617,27 @@ class Settings(Section):
     backbones: BackboneSettings = BackboneSettings()
 
 
+class SettingsLoader(yaml.SafeLoader):
+    """YAML for settings: YAML 1.1's base-60 numbers (`12:30:45` = 45045) and leading-zero
+    octals (`010` = 8) stay text, so a number setting refuses them instead of taking a
+    number nobody wrote."""
+
+
+def _int_or_text(loader, node):
+    text = node.value
+    if ":" in text or re.fullmatch(r"[-+]?0[0-7_]+", text):
+        return text
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+def _float_or_text(loader, node):
+    return node.value if ":" in node.value else yaml.SafeLoader.construct_yaml_float(loader, node)
+
+
+SettingsLoader.add_constructor("tag:yaml.org,2002:int", _int_or_text)
+SettingsLoader.add_constructor("tag:yaml.org,2002:float", _float_or_text)
+
+
 def _merge(base: dict, update: dict) -> dict:
     out = dict(base)
     for key, value in update.items():
@@ -639,7 +703,9 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
         return f"{source}: unknown setting '{loc}'"
     if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
         ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
-        message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), first["msg"])
+        message = first["msg"]
+        if ctx["related"]:
+            message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), message)
         return f"{source}: setting '{prefix}{ctx['key']}' = {_short(ctx['value'])}: {message}"
     info = _field_info(Settings, parts)
     allowed = allowed_range(info)
@@ -648,6 +714,8 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
 
 
 def settings_from_dict(data: dict, source: str = "settings") -> Settings:
+    if too_deep(data, MAX_NESTING):
+        raise ConfigError(f"{source}: settings nested deeper than {MAX_NESTING} levels (no setting needs more than a few)")
     try:
         return Settings.model_validate(data)
     except ValidationError as err:
@@ -672,7 +740,9 @@ def load_settings(
         path = Path(path)
         source = str(path)
         try:
-            loaded = yaml.safe_load(path.read_text()) or {}
+            loaded = yaml.load(path.read_text(), Loader=SettingsLoader) or {}
+        except RecursionError:
+            raise ConfigError(f"{path}: nested deeper than the YAML parser can follow (no setting needs more than a few levels)") from None
         except FileNotFoundError:
             raise ConfigError(f"config file not found: {path}") from None
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
@@ -688,7 +758,9 @@ def load_settings(
                 raise ConfigError(f"override '{item}' must look like dotted.key=value")
             key, raw = item.split("=", 1)
             try:
-                value = yaml.safe_load(raw)
+                value = yaml.load(raw, Loader=SettingsLoader)
+            except RecursionError:
+                raise ConfigError(f"override '{key.strip()}': value nested deeper than the YAML parser can follow") from None
             except yaml.YAMLError:
                 raise ConfigError(f"override '{item}': value is not valid YAML") from None
             data = _merge(data, _dotted_to_nested(key.strip(), value))
