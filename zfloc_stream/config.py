@@ -24,7 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
-from .documents import MAX_NESTING, too_deep
+from .documents import MAX_NESTING, load_yaml, text_number_hint, too_deep
 from .errors import ConfigError
 
 SolverName = Literal["3L", "2L", "2C", "LC"]
@@ -46,8 +46,7 @@ def _number_problem(value) -> str | None:
     if isinstance(value, bool):
         return "must be a number, not a boolean (true/false)"
     if isinstance(value, str):
-        hint = " (YAML 1.1 reads it in base 60)" if ":" in value else " (YAML 1.1 reads it as octal)" if re.fullmatch(r"[-+]?0[0-7_]+", value) else ""
-        return f"must be a number, got text{hint}: write the number itself"
+        return f"must be a number, got text{text_number_hint(value)}: write the number itself"
     if isinstance(value, float) and value != 0 and abs(value) < sys.float_info.min:
         return f"is a subnormal number (below {sys.float_info.min:.3g}): no setting means anything that small"
     return None
@@ -145,6 +144,10 @@ class FloorplanSettings(Section):
     wall_sample_spacing: float = Field(0.2, gt=0, le=10)  # m, floorplan wall pixels used by Cv are subsampled to this (a ratio: 0.2 m is plenty, 16x cheaper than 0.05)
     line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
     image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
+    # Memory budget of one plan, checked before anything is allocated: cells of its raster
+    # (an image: read from the file's header), and cells of the estimator's search grid
+    # over its extent (estimator.correlative.cell): a wrong resolution or unit blows that up.
+    max_cells: int = Field(25_000_000, ge=1, le=2_000_000_000)
 
 
 class SolverSettings(Section):
@@ -617,27 +620,6 @@ class Settings(Section):
     backbones: BackboneSettings = BackboneSettings()
 
 
-class SettingsLoader(yaml.SafeLoader):
-    """YAML for settings: YAML 1.1's base-60 numbers (`12:30:45` = 45045) and leading-zero
-    octals (`010` = 8) stay text, so a number setting refuses them instead of taking a
-    number nobody wrote."""
-
-
-def _int_or_text(loader, node):
-    text = node.value
-    if ":" in text or re.fullmatch(r"[-+]?0[0-7_]+", text):
-        return text
-    return yaml.SafeLoader.construct_yaml_int(loader, node)
-
-
-def _float_or_text(loader, node):
-    return node.value if ":" in node.value else yaml.SafeLoader.construct_yaml_float(loader, node)
-
-
-SettingsLoader.add_constructor("tag:yaml.org,2002:int", _int_or_text)
-SettingsLoader.add_constructor("tag:yaml.org,2002:float", _float_or_text)
-
-
 def _merge(base: dict, update: dict) -> dict:
     out = dict(base)
     for key, value in update.items():
@@ -740,7 +722,7 @@ def load_settings(
         path = Path(path)
         source = str(path)
         try:
-            loaded = yaml.load(path.read_text(), Loader=SettingsLoader) or {}
+            loaded = load_yaml(path.read_text()) or {}
         except RecursionError:
             raise ConfigError(f"{path}: nested deeper than the YAML parser can follow (no setting needs more than a few levels)") from None
         except FileNotFoundError:
@@ -758,7 +740,7 @@ def load_settings(
                 raise ConfigError(f"override '{item}' must look like dotted.key=value")
             key, raw = item.split("=", 1)
             try:
-                value = yaml.load(raw, Loader=SettingsLoader)
+                value = load_yaml(raw)
             except RecursionError:
                 raise ConfigError(f"override '{key.strip()}': value nested deeper than the YAML parser can follow") from None
             except yaml.YAMLError:

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import math
 import numbers
+import re
 
 import numpy as np
+import yaml
 
 # Deepest nesting a document may have. The deepest legitimate ones: GeoJSON MultiPolygon
 # coordinates inside a Feature inside a FeatureCollection (~8 levels), settings (~6).
@@ -56,4 +58,45 @@ def real_number(value) -> float | None:
         return math.inf if value > 0 else -math.inf
 
 
-__all__ = ["MAX_NESTING", "nesting_depth", "real_number", "too_deep"]
+class YamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader read the way a person means a number: `1e-3` is a float (YAML
+    1.1 wants a dot: `1e-3` would be text), while YAML 1.1's base-60 numbers
+    (`12:30:45` = 45045) and leading-zero octals (`010` = 8) stay text, so a number field
+    refuses them instead of taking a number nobody wrote."""
+
+
+_OCTAL = re.compile(r"[-+]?0[0-7_]+")
+
+
+def _int_or_text(loader, node):
+    text = node.value
+    if ":" in text or _OCTAL.fullmatch(text):
+        return text
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+def _float_or_text(loader, node):
+    return node.value if ":" in node.value else yaml.SafeLoader.construct_yaml_float(loader, node)
+
+
+YamlLoader.add_constructor("tag:yaml.org,2002:int", _int_or_text)
+YamlLoader.add_constructor("tag:yaml.org,2002:float", _float_or_text)
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789")
+)
+
+
+def text_number_hint(value: str) -> str:
+    """Why a YAML scalar that looks numeric stayed text (for error messages)."""
+    if ":" in value:
+        return " (YAML 1.1 reads it in base 60)"
+    if _OCTAL.fullmatch(value):
+        return " (YAML 1.1 reads it as octal)"
+    return ""
+
+
+def load_yaml(text: str):
+    return yaml.load(text, Loader=YamlLoader)
+
+
+__all__ = ["MAX_NESTING", "YamlLoader", "load_yaml", "nesting_depth", "real_number", "text_number_hint", "too_deep"]
