@@ -25,9 +25,9 @@ def box_image(h: int = 60, w: int = 80) -> np.ndarray:
     return img
 
 
-def write_ros(path: Path, image: np.ndarray | None = None, image_name: str = "map.png", **meta) -> Path:
-    if image is not None:
-        cv2.imwrite(str(path.parent / image_name), image)
+def write_ros(path: Path, pixels: np.ndarray | None = None, image_name: str = "map.png", **meta) -> Path:
+    if pixels is not None:
+        cv2.imwrite(str(path.parent / image_name), pixels)
     base = {"image": image_name, "resolution": 0.05, "origin": [0.0, 0.0, 0.0], "negate": 0,
             "occupied_thresh": 0.65, "free_thresh": 0.196}
     base.update(meta)
@@ -228,7 +228,7 @@ def fuzz_floorplan(rng: np.random.Generator, d: Path, case: int) -> tuple[Path, 
             path.write_bytes(_mutate_bytes(path.read_bytes(), rng))
         return path, {"scale": float(10 ** rng.uniform(-4, 1)) if rng.random() < 0.9 else _hostile_json(rng)}
     # geojson
-    data = collection(GEO_BOX, feature({"type": "Point", "coordinates": [5, 4]}, {"radius": 0.3}))
+    data = json.loads(json.dumps(collection(GEO_BOX, feature({"type": "Point", "coordinates": [5, 4]}, {"radius": 0.3}))))  # a fresh copy
     if how == 0:
         data["features"][1]["properties"]["radius"] = _hostile_json(rng)
     elif how == 1:

@@ -157,6 +157,14 @@ def _segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.nd
     return np.where(crossing, 0.0, dist)
 
 
+def _named(path: Path, cls, *args):
+    """cls(*args), its FloorplanError naming the file the plan came from."""
+    try:
+        return cls(*args)
+    except FloorplanError as err:
+        raise FloorplanError(f"{path}: {err}") from None
+
+
 class Floorplan:
     """Walls of one building in metres; build with from_occupancy / load / from_gibson_map."""
 
@@ -239,7 +247,7 @@ class Floorplan:
             occ = (255.0 - img) / 255.0 > cfg.floorplan.image_wall_threshold
             if flip_y:
                 occ = occ[::-1]
-            return cls(occ, resolution, origin, cfg, path.stem)
+            return _named(path, cls, occ, resolution, origin, cfg, path.stem)
         raise FloorplanError(f"{path}: unknown floorplan format '{path.suffix}' (expected .yaml/.yml or an image: {', '.join(IMAGE_SUFFIXES)})")
 
     @classmethod
@@ -277,13 +285,18 @@ class Floorplan:
         if not image.is_absolute():
             image = path.parent / image
         cfg = settings if settings is not None else Settings()
-        size = _image_size(image) if image.is_file() else None
+        if not image.is_file():
+            raise FloorplanError(f"{path}: its image {meta['image']!r} is not a file ({image})")
+        size = _image_size(image)
         if size is not None:  # the extent budget before the pixels are decoded
             check_plan_budget(size[::-1], resolution, cfg, str(path))
-        img = _read_gray(image, cfg).astype(float)
+        try:
+            img = _read_gray(image, cfg).astype(float)
+        except FloorplanError as err:
+            raise FloorplanError(f"{path}: {err}") from None
         p = img / 255.0 if negate else (255.0 - img) / 255.0
         occ = (p > occ_thresh)[::-1]  # image row 0 = largest y
-        return cls(occ, resolution, origin, settings, path.stem)
+        return _named(path, cls, occ, resolution, origin, settings, path.stem)
 
     @classmethod
     def from_gibson_map(cls, path, settings: Settings | None = None) -> Floorplan:

@@ -89,8 +89,9 @@ class VectorGeometry:
 
     def scaled(self, factor: float, flip_y: bool = False) -> VectorGeometry:
         s = np.array([factor, -factor if flip_y else factor])
-        return VectorGeometry([p * s for p in self.polylines], [r * s for r in self.rings],
-                              [(x * s[0], y * s[1], r * factor) for x, y, r in self.circles])
+        with np.errstate(over="ignore"):  # a coordinate scaled past float range: check_reach refuses it
+            return VectorGeometry([p * s for p in self.polylines], [r * s for r in self.rings],
+                                  [(x * s[0], y * s[1], r * factor) for x, y, r in self.circles])
 
     def is_empty(self) -> bool:
         return not (self.polylines or self.rings or self.circles)
