@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..config import dump_settings, load_settings
 from ..errors import ZflocError
+from .signals import interrupted, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-stream demo                                   # apartment scene, seed 0, into ./zfloc-demo
@@ -223,21 +224,21 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        if args.command == "demo":
-            return cmd_demo(args)
-        if args.command == "run":
-            return cmd_run(args)
-        if args.command == "config":
-            return cmd_config(args)
-        if args.command == "export":
-            return cmd_export(args)
-        return args.func(args)
+        with terminate_as_interrupt():  # SIGTERM closes the outputs as Ctrl-C does
+            if args.command == "demo":
+                return cmd_demo(args)
+            if args.command == "run":
+                return cmd_run(args)
+            if args.command == "config":
+                return cmd_config(args)
+            if args.command == "export":
+                return cmd_export(args)
+            return args.func(args)
     except ZflocError as err:
         print(f"zfloc-stream: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("zfloc-stream: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        return interrupted("zfloc-stream", err)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, SessionLogError, ZflocError
+from .signals import interrupted, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-replay session.mcap --check               # same decisions, numbers within tolerance? exit 0, else 1 + first divergence
@@ -174,13 +175,13 @@ def run(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return run(args)
+        with terminate_as_interrupt():
+            return run(args)
     except ZflocError as err:
         print(f"zfloc-replay: error: {str(err).splitlines()[0] if str(err) else type(err).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("zfloc-replay: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        return interrupted("zfloc-replay", err)
     except BrokenPipeError:  # output piped into e.g. head: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
