@@ -57,11 +57,12 @@ class TumWriter:
         self.close()
 
 
-def export_session_tum(session_path, tum_path) -> int:
-    """The estimates logged in a session file as a TUM file; returns the rows written."""
+def export_session_tum(session_path, tum_path, salvage: bool = False) -> int:
+    """The estimates logged in a session file as a TUM file; returns the rows written.
+    salvage: a file cut off or damaged is read as far as its intact chunks go."""
     from .session import read_session
 
-    session = read_session(session_path)
+    session = read_session(session_path, salvage=salvage)
     seen = 0
     with TumWriter(tum_path) as out:
         for record in session.records():

@@ -103,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
     run.add_argument("--seg-model", metavar="ID_OR_DIR", help="semantic segmentation network for wall/floor/ceiling labels "
                      "(sets backbones.seg_model; needs the [torch] extra)")
+    run.add_argument("--salvage", action="store_true", help="an MCAP session cut off by a crash (or damaged): read it as far as its intact chunks go")
     _add_floorplan_options(run)
     _add_settings_args(run)
 
@@ -116,6 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     export.add_argument("session", type=Path, help="a session.mcap written by zfloc-stream run/demo or zfloc-replay")
     export.add_argument("--tum", type=Path, required=True, metavar="PATH", help="TUM file to write")
+    export.add_argument("--salvage", action="store_true", help="a session cut off by a crash (or damaged): read it as far as its intact chunks go")
 
     config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
     config.add_argument("--config", type=Path, help="YAML settings file")
@@ -175,7 +177,7 @@ def cmd_run(args) -> int:
     if args.floorplan is not None:
         floorplan = load_floorplan(args, settings)
     sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed,
-                             settings=settings, topics=topics)
+                             settings=settings, topics=topics, salvage=args.salvage)
     if sequence.settings_overrides:
         settings = _run_settings(args, sequence.settings_overrides)
     if floorplan is None and sequence.source.startswith("carmen:"):
@@ -210,7 +212,7 @@ def _report(outcome) -> None:
 def cmd_export(args) -> int:
     from ..tum import export_session_tum
 
-    rows = export_session_tum(args.session, args.tum)
+    rows = export_session_tum(args.session, args.tum, salvage=args.salvage)
     print(f"wrote {args.tum} ({rows} poses)")
     return 0
 

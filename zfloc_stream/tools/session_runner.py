@@ -11,6 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..config import Settings
+from ..drops import DropCounter
 from ..estimate import Estimate
 from ..floorplan import Floorplan
 from ..localizer import Localizer
@@ -61,6 +62,7 @@ def run_session(
         frames = perception.stream(frames)
     estimates: list[Estimate] = []
     truths: list = []
+    drops = DropCounter(description)  # frames the localizer refused: warned once per cause
     with (
         localizer,  # stops a pipelined round worker, also when a frame source fails
         TrajectoryCsvWriter(out_dir / "trajectory.csv") as csv_writer,
@@ -73,8 +75,11 @@ def run_session(
             log.write_estimate(est, localizer)
             csv_writer.write(est)
             tum_writer.write(est)
+            if est.skipped is not None:
+                drops.note(est.skipped, f"frame {index}")
             estimates.append(est)
             truths.append(frame.ground_truth)
+    drops.summary()
     truth = None if any(t is None for t in truths) or not truths else np.array(truths, dtype=float)
     outcome = SessionOutcome(estimates, truth, out_dir, tum_writer.path)
     best = localizer.tracker.best
