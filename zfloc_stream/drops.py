@@ -18,12 +18,14 @@ class FrameDropWarning(UserWarning):
 
 
 _WHERE = re.compile(r"^(t=[-0-9.e+]+): (?:frame dropped: )?")
+_LOG_TIME = re.compile(r" \(log time \d+\)$")
 
 
 class DropCounter:
     def __init__(self, source: str):
         self.source = source
         self.counts: Counter[str] = Counter()
+        self.other: set[str] = set()  # causes of other problems already warned about
 
     def note(self, cause: str, where: str = "") -> None:
         self.counts[cause] += 1
@@ -32,9 +34,16 @@ class DropCounter:
             warnings.warn(f"{self.source}: frame dropped: {cause}{at}", FrameDropWarning, stacklevel=2)
 
     def note_problem(self, problem: str) -> None:
-        """A reader's problem line ('t=...: frame dropped: why'): its cause without the stamp."""
+        """A reader's problem line: a dropped frame ('t=...: frame dropped: why') is counted
+        by its cause; anything else ('... skipped: why (log time N)') is warned about once."""
         m = _WHERE.match(problem)
-        self.note(problem[m.end():] if m else problem, m.group(1) if m else "")
+        if m or "frame dropped" in problem:
+            self.note(problem[m.end():] if m else problem, m.group(1) if m else "")
+            return
+        cause = _LOG_TIME.sub("", problem)
+        if cause not in self.other:
+            self.other.add(cause)
+            warnings.warn(f"{self.source}: {problem}", FrameDropWarning, stacklevel=2)
 
     @property
     def total(self) -> int:

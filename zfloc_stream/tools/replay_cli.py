@@ -153,6 +153,13 @@ def run(args) -> int:
     last = args.start + result.frames - 1
     if args.check:
         print(environment.describe(session.environment))
+        damage = [p for p in session.problems if p.startswith(("damaged file", "chunk skipped"))]
+        if result.divergence is not None and damage:
+            # frames are missing in the middle: the replay's state cannot continue across the
+            # gap, so what differs after it is the damage, not the code
+            where = damage[0].removeprefix("damaged file: ")
+            print(f"damaged file: {where}; the replay differs after it ({result.divergence}): not a replay difference")
+            return 2
         if result.divergence is not None:
             print(f"DIVERGED at {result.divergence}")
             return 1
