@@ -251,3 +251,27 @@ def fuzz_floorplan(rng: np.random.Generator, d: Path, case: int) -> tuple[Path, 
     if how != 3 and rng.random() < 0.2:
         path.write_bytes(_mutate_bytes(path.read_bytes(), rng))
     return path, {}
+
+
+# --- hostile settings, as a user types them ---------------------------------------------------------
+# YAML text after `--set key=`: booleans, YAML 1.1 base-60 and octal numbers, subnormals,
+# text, deep nesting, huge and non-finite numbers, empty values.
+HOSTILE_SETTING_TEXT = (
+    "true", "false", "yes", "on", "~", "", "12:30:45", "-1:30", "190:20:30.15", "010", "0x1F", "0b101", "1_000",
+    "4.9e-324", "-4.9e-324", "1e-310", "1e308", "1e400", "-1e400", ".nan", ".inf", "nan", "'5'", '"0.5"', "abc",
+    "[1, 2]", "{a: 1}", "[[[[1]]]]", "2024-01-01", "!!binary aGk=", "0.", "-0", "1e3", "5e-2", "+7",
+)
+
+
+def hostile_setting(rng: np.random.Generator, keys: list[str]) -> str:
+    """One `key=value` override: a seeded key and a hostile YAML text (or a nesting)."""
+    key = keys[int(rng.integers(len(keys)))]
+    pick = rng.random()
+    if pick < 0.1:
+        depth = int(rng.integers(20, 3000))
+        value = "[" * depth + "1" + "]" * depth
+    elif pick < 0.15:
+        value = f"{rng.choice([-1, 1]) * rng.uniform(1, 10):.6f}e{int(rng.integers(-330, 330))}"  # past float range too
+    else:
+        value = HOSTILE_SETTING_TEXT[int(rng.integers(len(HOSTILE_SETTING_TEXT)))]
+    return f"{key}={value}"

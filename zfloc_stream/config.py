@@ -24,7 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
-from .documents import MAX_NESTING, load_yaml, text_number_hint, too_deep
+from .documents import MAX_NESTING, TooDeep, load_yaml, text_number_hint, too_deep
 from .errors import ConfigError
 
 SolverName = Literal["3L", "2L", "2C", "LC"]
@@ -727,8 +727,8 @@ def load_settings(
         source = str(path)
         try:
             loaded = load_yaml(path.read_text()) or {}
-        except RecursionError:
-            raise ConfigError(f"{path}: nested deeper than the YAML parser can follow (no setting needs more than a few levels)") from None
+        except TooDeep as err:
+            raise ConfigError(f"{path}: settings {err} (no setting needs more than a few)") from None
         except FileNotFoundError:
             raise ConfigError(f"config file not found: {path}") from None
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
@@ -745,8 +745,8 @@ def load_settings(
             key, raw = item.split("=", 1)
             try:
                 value = load_yaml(raw)
-            except RecursionError:
-                raise ConfigError(f"override '{key.strip()}': value nested deeper than the YAML parser can follow") from None
+            except TooDeep as err:
+                raise ConfigError(f"override '{key.strip()}': value {err} (no setting needs more than a few)") from None
             except yaml.YAMLError:
                 raise ConfigError(f"override '{item}': value is not valid YAML") from None
             data = _merge(data, _dotted_to_nested(key.strip(), value))

@@ -95,8 +95,40 @@ def text_number_hint(value: str) -> str:
     return ""
 
 
+def flow_depth(text: str) -> int:
+    """Deepest nesting of YAML/JSON flow brackets ([ and {) in text, quoted text skipped:
+    a cheap look before parsing, since PyYAML takes seconds to fail on thousands of levels."""
+    depth = deepest = 0
+    quote = None
+    for ch in text:
+        if quote is not None:
+            if ch == quote:
+                quote = None
+        elif ch in "'\"":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+    return deepest
+
+
+class TooDeep(ValueError):
+    """A document nested deeper than MAX_NESTING (found before or while parsing)."""
+
+
 def load_yaml(text: str):
-    return yaml.load(text, Loader=YamlLoader)
+    """YAML read with YamlLoader; TooDeep when it nests deeper than MAX_NESTING."""
+    if flow_depth(text) > MAX_NESTING:
+        raise TooDeep(f"nested deeper than {MAX_NESTING} levels")
+    try:
+        data = yaml.load(text, Loader=YamlLoader)
+    except RecursionError:
+        raise TooDeep("nested deeper than the YAML parser can follow") from None
+    if too_deep(data):
+        raise TooDeep(f"nested deeper than {MAX_NESTING} levels")
+    return data
 
 
-__all__ = ["MAX_NESTING", "YamlLoader", "load_yaml", "nesting_depth", "real_number", "text_number_hint", "too_deep"]
+__all__ = ["MAX_NESTING", "TooDeep", "YamlLoader", "flow_depth", "load_yaml", "nesting_depth", "real_number", "text_number_hint", "too_deep"]

@@ -27,7 +27,7 @@ import yaml
 from scipy import ndimage
 
 from .config import Settings
-from .documents import MAX_NESTING, load_yaml, real_number, too_deep
+from .documents import TooDeep, load_yaml, real_number
 from .errors import FloorplanError, InputError
 from .geometry import CircleSet, LineSet
 from .primitives import as_points, deduplicate_lines, extract_circles, extract_lines, grid_subsample
@@ -258,10 +258,8 @@ class Floorplan:
             meta = load_yaml(path.read_text())
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
             raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
-        except RecursionError:
-            raise FloorplanError(f"{path}: nested deeper than the YAML parser can follow (a map YAML is a flat mapping)") from None
-        if too_deep(meta, MAX_NESTING):
-            raise FloorplanError(f"{path}: nested deeper than {MAX_NESTING} levels (a map YAML is a flat mapping)")
+        except TooDeep as err:
+            raise FloorplanError(f"{path}: {err} (a map YAML is a flat mapping)") from None
         if isinstance(meta, dict) and "vector" in meta:  # a vector plan (as written into sessions)
             from .vector_floorplan import load_vector_yaml
 
