@@ -17,6 +17,8 @@ in isolated wall blobs no wider than a pillar.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import threading
 from functools import cached_property
 from pathlib import Path
@@ -59,16 +61,56 @@ def _image_size(path: Path) -> tuple[int, int] | None:
             Image.MAX_IMAGE_PIXELS = guard
 
 
+def _decodes(path: Path) -> str | None:
+    """Why Pillow cannot decode the image (None when it can, or does not know the format):
+    checked before cv2 reads it, since libpng prints its own errors on stderr."""
+    from PIL import Image, UnidentifiedImageError
+
+    with _PIL_LOCK:
+        guard, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            with Image.open(path) as im:
+                im.load()
+        except UnidentifiedImageError:
+            return None
+        except Exception as err:  # noqa: BLE001 - any decoder fault on damaged bytes
+            return f"{type(err).__name__}: {err}"
+        finally:
+            Image.MAX_IMAGE_PIXELS = guard
+    return None
+
+
 def _read_gray(path: Path, settings: Settings | None = None) -> np.ndarray:
     if not path.is_file():
         raise FloorplanError(f"floorplan image not found: {path}")
     size = _image_size(path)
     if size is not None:  # the budget before the pixels are decoded
         _check_cells(size[1], size[0], settings if settings is not None else Settings(), str(path))
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        broken = _decodes(path)
+        if broken is not None:
+            raise FloorplanError(f"cannot read floorplan image {path}: damaged ({broken})")
+    with _quiet_stderr():  # libpng prints its own messages for damaged files; ours follows
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if img is None or img.size == 0:
         raise FloorplanError(f"cannot read floorplan image (not a readable image file): {path}")
     return img
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """File descriptor 2 to /dev/null for the block (C libraries' own messages)."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _check_cells(h: int, w: int, settings: Settings, source: str) -> None:

@@ -39,6 +39,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import yaml
+from scipy.integrate import IntegrationWarning
 
 from .config import Settings
 from .documents import MAX_NESTING, real_number, too_deep
@@ -162,6 +163,8 @@ def _read_dxf(path: Path, scale, layers, skip_layers) -> VectorGeometry:
         raise FloorplanError(f"cannot read DXF floorplan {path}: {err.strerror or err}") from None
     except ezdxf.DXFError as err:
         raise FloorplanError(f"{path}: not a valid DXF file ({err})") from None
+    except Exception as err:  # noqa: BLE001 - ezdxf's parser raises StopIteration, ValueError... on damaged files
+        raise FloorplanError(f"{path}: not a readable DXF file ({type(err).__name__}: {err})") from None
     factor = _dxf_units(doc, path, scale)
     wanted = None if not layers else {name.lower() for name in layers}
     skipped = {name.lower() for name in skip_layers or ()}
@@ -229,7 +232,20 @@ def _read_svg(path: Path, scale) -> VectorGeometry:
         raise FloorplanError(f"cannot read SVG floorplan {path}: {err.strerror or err}") from None
     except Exception as err:  # noqa: BLE001 - svgelements raises XML and value errors of many kinds
         raise FloorplanError(f"{path}: not a readable SVG file ({type(err).__name__}: {err})") from None
+    if not isinstance(svg, se.SVG):  # a damaged file parses to a bare element, or to nothing
+        raise FloorplanError(f"{path}: not an SVG drawing (no <svg> root element)")
     geometry = VectorGeometry()
+    with warnings.catch_warnings():
+        # svgelements measures curves by numerical integration, which warns on extreme values
+        # (refused below by their own checks): not the user's business
+        warnings.simplefilter("ignore", IntegrationWarning)
+        _svg_elements(svg, se, path, scale, geometry)
+    geometry = geometry.scaled(scale, flip_y=True)
+    geometry.check_reach(path)
+    return geometry
+
+
+def _svg_elements(svg, se, path: Path, scale: float, geometry: VectorGeometry) -> None:
     for k, element in enumerate(svg.elements()):
         what = f"{path}: SVG element {k} <{type(element).__name__.lower()}>"
         try:
@@ -258,9 +274,6 @@ def _read_svg(path: Path, scale) -> VectorGeometry:
             raise
         except (ValueError, OverflowError, ZeroDivisionError, TypeError, ArithmeticError, AttributeError) as err:
             raise FloorplanError(f"{what} cannot be read ({type(err).__name__}: {err})".replace("\n", " ")) from None
-    geometry = geometry.scaled(scale, flip_y=True)
-    geometry.check_reach(path)
-    return geometry
 
 
 def _read_geojson(path: Path, scale) -> VectorGeometry:
@@ -518,12 +531,11 @@ class VectorFloorplan(Floorplan):
 def _check_scale(scale, path: Path) -> float | None:
     if scale is None:
         return None
-    try:
-        value = float(scale)
-    except (TypeError, ValueError):
-        raise FloorplanError(f"{path}: scale must be a number of metres per drawing unit, got {scale!r}") from None
+    value = real_number(scale)
+    if value is None:
+        raise FloorplanError(f"{path}: scale must be a number of metres per drawing unit, got {str(scale)[:40]!r}")
     if not (math.isfinite(value) and value > 0):
-        raise FloorplanError(f"{path}: scale must be positive (metres per drawing unit), got {scale!r}")
+        raise FloorplanError(f"{path}: scale must be positive and finite (metres per drawing unit), got {str(scale)[:40]}")
     return value
 
 
