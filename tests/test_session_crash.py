@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -129,3 +130,52 @@ def test_salvaged_engine_session_replays_identically(tmp_path, capsys):
     checked = int(captured.out.split("identical: ")[1].split()[0])
     assert checked >= written - MAX_LOST, captured
     assert "note: reading stopped: file is truncated" in captured.err
+
+
+@pytest.mark.parametrize("background", ["true", "false"])
+def test_default_chunking_loses_no_finished_frame(tmp_path, background):
+    """With the default chunk_max_frames (1) a frame's chunk closes right after its
+    estimate: a kill loses no finished frame, only one still queued for the background
+    writer (at most max_pending_batches / 2 frames; none when writing inline)."""
+    path = tmp_path / f"default-{background}.mcap"
+    code = CHILD.format(tests=str(Path(__file__).parent), chunk=1, pending=PENDING_BATCHES, path=str(path))
+    code = code.replace('"logging.chunk_size=100000000",', f'"logging.chunk_size=100000000", "logging.background={background}",')
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    written = -1
+    try:
+        for line in child.stdout:
+            written = int(line)
+            if written + 1 >= 7:
+                break
+    finally:
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+    session = read_session(path, salvage=True)
+    recovered = len(list(session.records()))
+    queued = PENDING_BATCHES // 2 if background == "true" else 0
+    assert recovered >= written + 1 - queued, (recovered, written + 1)
+
+
+def test_sigterm_closes_the_session_like_ctrl_c(tmp_path):
+    """SIGTERM (service managers, containers): the session file gets its footer, every
+    frame in it reads without --salvage, one line says how the run ended, exit 143."""
+    out = tmp_path / "run"
+    child = subprocess.Popen([sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", "rooms", "--frames", "400",
+                              "--out", str(out), "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    csv = out / "trajectory.csv"
+    try:
+        for _ in range(6000):
+            if csv.is_file() and len(csv.read_text().splitlines()) > 6:
+                break
+            assert child.poll() is None, child.stderr.read()
+            time.sleep(0.05)
+        child.send_signal(signal.SIGTERM)
+        _, err = child.communicate(timeout=120)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert child.returncode == 143 and err.strip().splitlines() == [
+        "zfloc-stream: terminated (SIGTERM): outputs written so far were closed; exit 143"], err
+    rows = len(csv.read_text().splitlines()) - 1
+    records = list(read_session(out / "session.mcap").records())  # strict: the footer is there
+    assert rows >= 6 and len(records) >= rows and records[-1].index == len(records) - 1

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 from pydantic import BaseModel
 
+from fuzz_inputs import hostile_setting
+
 from zfloc_stream.config import Settings, allowed_range, load_settings
 from zfloc_stream.errors import ConfigError
 from zfloc_stream.floorplan import Floorplan
@@ -119,9 +121,47 @@ def test_settings_fuzz_wide(tmp_path):
     fuzz(cases, tmp_path)
 
 
+def fuzz_typed(seed: int, n: int) -> dict[str, int]:
+    """n seeded `--set key=text` overrides as a user types them (booleans, base-60 and
+    octal numbers, subnormals, text, nesting thousands deep): each is one ConfigError line
+    naming its key, or is accepted with the value it spells (never a silent coercion)."""
+    rng = np.random.default_rng(seed)
+    keys = list(LEAVES)
+    outcomes = {"refused": 0, "accepted": 0}
+    for _ in range(n):
+        override = hostile_setting(rng, keys)
+        key, text = override.split("=", 1)
+        try:
+            settings = load_settings(overrides=[override])
+        except ConfigError as err:
+            message = str(err)
+            assert "\n" not in message and (key in message or "nested deeper" in message), (override[:80], message)
+            outcomes["refused"] += 1
+            continue
+        value = settings
+        for part in key.split("."):
+            value = getattr(value, part)
+        if LEAVES[key].annotation in (int, float):  # a number setting holds a number that was written as one
+            assert not isinstance(value, bool) and text.strip().lower() not in ("true", "false", "yes", "on") and ":" not in text, (override, value)
+        outcomes["accepted"] += 1
+    return outcomes
+
+
+def test_typed_settings_fuzz():
+    outcomes = fuzz_typed(seed=29, n=1200)
+    assert outcomes["refused"] > 800 and outcomes["accepted"] > 20, outcomes
+
+
 @pytest.mark.parametrize(
     "override, message",
     [
+        ("seed=12:30:45", "setting 'seed' = '12:30:45': must be a number, got text (YAML 1.1 reads it in base 60)"),
+        ("seed=010", "setting 'seed' = '010': must be a number, got text (YAML 1.1 reads it as octal)"),
+        ("localizer.every_k_frames=true", "setting 'localizer.every_k_frames' = True: must be a number, not a boolean"),
+        ("bev.resolution=true", "setting 'bev.resolution' = True: must be a number, not a boolean"),
+        ("estimator.scale_prior=4.9e-324", "setting 'estimator.scale_prior' = 5e-324: is a subnormal number"),
+        ("seed=" + "[" * 70 + "]" * 70, "nested deeper than 64 levels"),
+        ("seed=" + "[" * 3000 + "]" * 3000, "override 'seed': value nested deeper than 64 levels"),
         ("localizer.every_k_frames=0", "setting 'localizer.every_k_frames' = 0: Input should be greater than or equal to 1; allowed range [1, 10000] (integer)"),
         ("tracking.gate_chi2=-5", "setting 'tracking.gate_chi2' = -5: Input should be greater than 0; allowed range (0, 1000000]"),
         ("estimator.ransac.iterations=0", "setting 'estimator.ransac.iterations' = 0"),

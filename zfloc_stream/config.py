@@ -15,6 +15,8 @@ same way: `name: float = Field(default, gt=0, le=10)  # unit, meaning`.
 from __future__ import annotations
 
 import re
+import sys
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -22,6 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
+from .documents import MAX_NESTING, TooDeep, load_yaml, text_number_hint, too_deep
 from .errors import ConfigError
 
 SolverName = Literal["3L", "2L", "2C", "LC"]
@@ -30,9 +33,48 @@ ScaleMode = Literal["free", "prior", "fixed"]
 MAX_BEV_HALF_CELLS = 2000
 
 
+def _numeric(annotation) -> bool:
+    """Whether a field (or a list's item) annotation is int or float."""
+    if typing.get_origin(annotation) is Annotated:
+        annotation = typing.get_args(annotation)[0]
+    return annotation in (int, float)
+
+
+def _number_problem(value) -> str | None:
+    """Why a value given for a number setting is not one: pydantic would read True as 1,
+    the text '5' as 5, and a subnormal float (4.9e-324) passes every `gt=0`."""
+    if isinstance(value, bool):
+        return "must be a number, not a boolean (true/false)"
+    if isinstance(value, str):
+        return f"must be a number, got text{text_number_hint(value)}: write the number itself"
+    if isinstance(value, float) and value != 0 and abs(value) < sys.float_info.min:
+        return f"is a subnormal number (below {sys.float_info.min:.3g}): no setting means anything that small"
+    return None
+
+
 class Section(BaseModel):
     # NaN or infinity is never a usable setting (a NaN threshold silently fails every comparison)
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def numbers_are_numbers(cls, data):
+        """Number settings take numbers only: no booleans, no text, no subnormals."""
+        if not isinstance(data, dict):
+            return data
+        for name, info in cls.model_fields.items():
+            if name not in data:
+                continue
+            value, annotation = data[name], info.annotation
+            if _numeric(annotation):
+                problem = _number_problem(value)
+            elif typing.get_origin(annotation) is list and _numeric(typing.get_args(annotation)[0]) and isinstance(value, list):
+                problem = next((f"item {i} {p}" for i, p in ((i, _number_problem(v)) for i, v in enumerate(value)) if p), None)
+            else:
+                continue
+            if problem is not None:
+                raise section_rule_error(name, value, problem, ())
+        return data
 
 
 def section_rule_error(key: str, value: object, message: str, related: tuple[str, ...]) -> PydanticCustomError:
@@ -103,6 +145,10 @@ class FloorplanSettings(Section):
     line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
     image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
     max_triplets: int = Field(2_000_000, ge=1, le=1_000_000_000)  # 3L table rows (~80 B each while built); a cluttered map past this keeps each line's nearest neighbours only (real maps: <= 0.5 M)
+    # Memory budget of one plan, checked before anything is allocated: cells of its raster
+    # (an image: read from the file's header), and cells of the estimator's search grid
+    # over its extent (estimator.correlative.cell): a wrong resolution or unit blows that up.
+    max_cells: int = Field(25_000_000, ge=1, le=2_000_000_000)
 
 
 class SolverSettings(Section):
@@ -423,7 +469,11 @@ class LoggingSettings(Section):
 
     compression: Literal["zstd", "lz4", "none"] = "zstd"  # per-chunk compression
     chunk_size: int = Field(1048576, ge=1024, le=1 << 30)  # bytes; a chunk is closed once its records exceed this...
-    chunk_max_frames: int = Field(10, ge=1, le=1_000_000)  # ...or after this many frames: bounds what a crash loses
+    # ...or once it holds this many complete frames (closed right after the frame's
+    # estimate): what a killed process can lose besides the frame in flight. 1 measured
+    # cheap (benchmarks/fuzz_inputs.py notes; laser: +0.5 ms and +19 % bytes per frame,
+    # camera frames fill a chunk_size chunk each anyway)
+    chunk_max_frames: int = Field(1, ge=1, le=1_000_000)
     bev_every_n_frames: int = Field(10, ge=0, le=1_000_000)  # publish /zfloc/bev every n frames (0 = never)
     background: bool = True  # compress + write on a worker thread (the caller only serializes)
     max_pending_batches: int = Field(4, ge=1, le=10_000)  # batches (2 per frame) queued for the worker; a crash loses them too
@@ -652,7 +702,9 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
         return f"{source}: unknown setting '{loc}'" + _suggest_key(parts)
     if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
         ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
-        message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), first["msg"])
+        message = first["msg"]
+        if ctx["related"]:
+            message = re.sub(rf"\b({'|'.join(ctx['related'])})\b", lambda m: prefix + m.group(1), message)
         return f"{source}: setting '{prefix}{ctx['key']}' = {_short(ctx['value'])}: {message}"
     info = _field_info(Settings, parts)
     allowed = allowed_range(info)
@@ -661,6 +713,8 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
 
 
 def settings_from_dict(data: dict, source: str = "settings") -> Settings:
+    if too_deep(data, MAX_NESTING):
+        raise ConfigError(f"{source}: settings nested deeper than {MAX_NESTING} levels (no setting needs more than a few)")
     try:
         return Settings.model_validate(data)
     except ValidationError as err:
@@ -685,7 +739,9 @@ def load_settings(
         path = Path(path)
         source = str(path)
         try:
-            loaded = yaml.safe_load(path.read_text()) or {}
+            loaded = load_yaml(path.read_text()) or {}
+        except TooDeep as err:
+            raise ConfigError(f"{path}: settings {err} (no setting needs more than a few)") from None
         except FileNotFoundError:
             raise ConfigError(f"config file not found: {path}") from None
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
@@ -701,7 +757,9 @@ def load_settings(
                 raise ConfigError(f"override '{item}' must look like dotted.key=value")
             key, raw = item.split("=", 1)
             try:
-                value = yaml.safe_load(raw)
+                value = load_yaml(raw)
+            except TooDeep as err:
+                raise ConfigError(f"override '{key.strip()}': value {err} (no setting needs more than a few)") from None
             except yaml.YAMLError:
                 raise ConfigError(f"override '{item}': value is not valid YAML") from None
             data = _merge(data, _dotted_to_nested(key.strip(), value))

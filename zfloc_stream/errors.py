@@ -14,7 +14,11 @@ class ConfigError(ZflocError):
 
 
 class FloorplanError(ZflocError):
-    """A floorplan cannot be read or is unusable (missing file, bad YAML, no walls)."""
+    """A floorplan cannot be read or is unusable (missing file, bad YAML, no walls).
+    Always one line: messages quoting a parser's own (multi-line) error are flattened."""
+
+    def __init__(self, message: str = ""):
+        super().__init__(" ".join(str(message).split()) if "\n" in str(message) or "\r" in str(message) else message)
 
 
 class InputError(ZflocError):

@@ -60,6 +60,9 @@ class CameraFrame:
     ground_truth: optional (x, y, theta) of the camera in the floorplan frame; never seen
     by the localizer, carried for logging and scoring.
     rgb: optional HxWx3 uint8 colour image (RGB order) of the same pixel grid.
+    depth_unit: "m" (default) or "mm": what the depth numbers count. Integer depth (a
+    16-bit depth camera's millimetres) must say "mm" (it is converted to float32 metres);
+    integer depth said to be metres, boolean and complex depth are refused.
     """
 
     depth: np.ndarray | None
@@ -69,6 +72,7 @@ class CameraFrame:
     timestamp: float
     ground_truth: np.ndarray | None = field(default=None, compare=False)
     rgb: np.ndarray | None = field(default=None, compare=False)
+    depth_unit: str = field(default="m", compare=False)
 
     def __post_init__(self):
         rgb = None if self.rgb is None else _check_rgb(self.rgb)
@@ -78,7 +82,8 @@ class CameraFrame:
                 raise FrameError("a camera frame needs depth or an RGB image")
             self._check_rest(rgb.shape[:2])
             return
-        d = _as_float_array(self.depth, "depth", np.float32)
+        d = _depth_in_metres(self.depth, self.depth_unit)
+        object.__setattr__(self, "depth_unit", "m")
         if d.ndim != 2 or d.size == 0:
             raise FrameError(f"depth must be a non-empty HxW array, got shape {d.shape}")
         if np.isinf(d).any():
@@ -117,6 +122,25 @@ class CameraFrame:
     @property
     def shape(self) -> tuple[int, int]:
         return self.depth.shape if self.depth is not None else self.rgb.shape[:2]
+
+
+DEPTH_UNITS = {"m": 1.0, "mm": 1e-3}
+
+
+def _depth_in_metres(depth, unit: str) -> np.ndarray:
+    """float32 metres from depth in `unit`. Integer depth is millimetres by every camera
+    convention, so read as metres it would be 1000x too far: it must be declared."""
+    if unit not in DEPTH_UNITS:
+        raise FrameError(f"depth_unit must be one of {', '.join(DEPTH_UNITS)}, got {unit!r}")
+    raw = np.asarray(depth)
+    kind = raw.dtype.kind
+    if kind in "bc":
+        raise FrameError(f"depth must be real numbers of distance, got {raw.dtype} values")
+    if kind in "iu" and unit == "m":
+        raise FrameError(f"depth is {raw.dtype}: integer depth is millimetres by camera convention; "
+                         "declare it (CameraFrame(..., depth_unit='mm')) or pass float metres")
+    d = _as_float_array(raw, "depth", np.float32)
+    return d if unit == "m" else (d.astype(np.float64) * DEPTH_UNITS[unit]).astype(np.float32)
 
 
 def _check_rgb(rgb) -> np.ndarray:

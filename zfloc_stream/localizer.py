@@ -158,6 +158,10 @@ class Localizer:
         frames carry depth never loads them)."""
         self.settings = settings or Settings()
         check_kernels(self.settings.estimator.kernels)  # numba asked for but missing: one line now, not at the first round
+        if self.settings.estimator.scoring.backend == "torch":  # likewise torch: else every round is skipped, no pose ever
+            from .backbones.base import require_torch
+
+            require_torch("estimator.scoring.backend: torch")
         self.perception = perception
         self.floorplan = floorplan
         self.bev = RollingBEV(self.settings)

@@ -131,13 +131,14 @@ def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return m[:, 0], np.column_stack([m[:, 1], m[:, 2], yaw])
 
 
-def export_session_tum(session_path, tum_path) -> TumWriter:
+def export_session_tum(session_path, tum_path, salvage: bool = False) -> TumWriter:
     """The estimates logged in a session file as a TUM file; returns the closed writer
     (rows written, rows at a moved stamp). The stamps follow the same rule as a live run's
-    trajectory.tum, so both files are equal."""
+    trajectory.tum, so both files are equal. salvage: a file cut off or damaged is read as far
+    as its intact chunks go."""
     from .session import read_session
 
-    session = read_session(session_path)
+    session = read_session(session_path, salvage=salvage)
     seen = 0
     with TumWriter(tum_path) as out:
         for record in session.records():

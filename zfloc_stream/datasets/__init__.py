@@ -46,12 +46,14 @@ def detect_source(
     seed: int | None = None,
     settings: Settings | None = None,
     topics: dict[str, str] | None = None,
+    salvage: bool = False,
 ) -> Sequence:
     """One Sequence from a path, recognised by content: an MCAP session (magic bytes), a
     Gibson(t) scene folder (map.png + poses.txt + depth40.txt), or a Carmen log, plain or
     gzipped (FLASER / ROBOTLASER1 lines). odometry_noise: synthetic drift fraction for
     sources whose poses are ground truth (None: settings.datasets.odometry.noise). An MCAP
-    file with ROS 2 (CDR) channels is read as a ROS 2 bag; topics: its role -> topic overrides."""
+    file with ROS 2 (CDR) channels is read as a ROS 2 bag; topics: its role -> topic overrides.
+    salvage: an MCAP session cut off or damaged is read as far as its intact chunks go."""
     settings = settings if settings is not None else Settings()
     if seed is not None:
         settings = settings.model_copy(update={"seed": int(seed)})
@@ -72,7 +74,7 @@ def detect_source(
     if topics:
         raise InputError(f"--topic applies to ROS 2 bags only; {path} is not one")
     if head.startswith(MCAP_MAGIC):
-        return mcap.session_sequence(path, settings, floorplan=floorplan)
+        return mcap.session_sequence(path, settings, floorplan=floorplan, salvage=salvage)
     if carmen.looks_like_carmen(head):
         return carmen.carmen_sequence(path, settings, floorplan=floorplan, odometry_noise=odometry_noise)
     raise InputError(f"unrecognised input {path}: not an MCAP session, a Gibson(t) scene folder or a Carmen log")

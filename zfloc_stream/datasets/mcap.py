@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Settings
+from ..drops import DropCounter
 from ..errors import InputError
 from ..frames import LaserFrame
 from .base import Sequence, register
@@ -25,12 +26,13 @@ from .base import Sequence, register
 SIBLING_FLOORPLAN = "map.yaml"
 
 
-def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
+def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = False) -> Sequence:
+    """salvage: read a truncated or damaged file as far as its intact chunks go."""
     from ..floorplan import Floorplan
     from ..session import read_session
 
     path = Path(path)
-    session = read_session(path)
+    session = read_session(path, salvage=salvage)
     index = session.frame_index()
     if index is not None:
         truth, kinds = index.ground_truth, set(index.kinds)
@@ -45,7 +47,13 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
     laser, rgb_only = "laser" in kinds, "rgb" in kinds
 
     def frames(start: int, stop: int):
-        return session.fresh().frames(start, stop)  # shares the index; its own problem list
+        reader = session.fresh()  # shares the index; its own problem list
+        drops, seen = DropCounter(str(path)), 0
+        for frame in reader.frames(start, stop):
+            seen = _report(reader.problems, seen, drops)
+            yield frame
+        _report(reader.problems, seen, drops)
+        drops.summary()
 
     def load_floorplan():
         if session.floorplan is not None:
@@ -69,6 +77,13 @@ def session_sequence(path, settings: Settings, floorplan=None) -> Sequence:
 
     sequence.topics = {t.rsplit("/", 1)[-1]: t for t in INPUT_TOPICS if session.topics is None or t in session.topics}
     return sequence
+
+
+def _report(problems: list[str], seen: int, drops: DropCounter) -> int:
+    """Warn about the reader's problems noted since the last call; returns how many there are."""
+    for problem in problems[seen:]:
+        drops.note_problem(problem)
+    return len(problems)
 
 
 @register("mcap")

@@ -531,12 +531,21 @@ class Session:
             if ch.topic != S.TOPIC_STATUS and msg.HasField("timestamp") and S.from_stamp(msg.timestamp) > 0:
                 stamp = S.from_stamp(msg.timestamp)
         except SessionLogError as err:
-            self._fail(f"{ch.topic} message at log time {record.log_time}: {err}")
+            self._fail_message(ch, record, stamp_only, str(err))
             return None
         except Exception as err:  # noqa: BLE001 - protobuf on damaged bytes
-            self._fail(f"{ch.topic} message at log time {record.log_time} cannot be decoded ({type(err).__name__})")
+            self._fail_message(ch, record, stamp_only, f"cannot be decoded ({type(err).__name__})")
             return None
         return stamp, None if stamp_only else msg
+
+    def _fail_message(self, ch: _Channel, record: Message, stamp_only: bool, why: str) -> None:
+        """An undecodable message refuses the file, unless localizing does not need its
+        topic (ground truth; logged outputs when they are not being read): then it is
+        skipped and noted (the run warns once per cause)."""
+        if ch.topic == S.TOPIC_GROUND_TRUTH or (stamp_only and ch.topic in _OUTPUT_TOPICS):
+            self.problems.append(f"{ch.topic} message skipped: {why}; localizing does not need it (log time {record.log_time})")
+            return
+        self._fail(f"{ch.topic} message at log time {record.log_time}: {why}")
 
     def _channel(self, channel: Channel, schemas: dict, factory: DecoderFactory) -> _Channel | None:
         """A decoder for a session topic; None for topics this package does not read."""
@@ -738,12 +747,31 @@ class _FrameGrouper:
 
 
 # --- opening -----------------------------------------------------------------------------------
+@dataclass
+class _Zeroed:
+    """A record with opcode 0x00, which MCAP reserves as invalid: bytes overwritten with
+    zeros (9 zero bytes parse as an empty record, so a zeroed region reads as a run of them)."""
+
+    length: int
+
+
+class _DamageAwareReader(StreamReader):
+    """StreamReader that reports opcode-0 records instead of skipping them as unknown."""
+
+    def _read_record(self, opcode: int, length: int):
+        if opcode == 0:
+            self._stream.read(length)
+            return _Zeroed(length)
+        return super()._read_record(opcode, length)
+
+
 def _records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
     """Records in file order, chunks broken up. Faults raise (or, salvaging, end the scan
-    at a damaged record and skip a damaged chunk)."""
+    at a damaged record and skip a damaged chunk or a zeroed region)."""
     size = path.stat().st_size
+    zeroed_from = None  # start of the zeroed region being skipped (salvage)
     with open(path, "rb") as f:
-        reader = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size)
+        reader = _DamageAwareReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size)
         records = reader.records
         while True:
             offset = f.tell()
@@ -757,6 +785,15 @@ def _records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
                     raise SessionLogError(f"{path}: {what}") from None
                 problems.append(f"reading stopped: {what}")
                 return
+            if isinstance(record, _Zeroed):
+                if not salvage:
+                    raise SessionLogError(f"{path}: damaged file: zeroed bytes at byte {offset} (a region overwritten with zeros); "
+                                          "read around it with --salvage")
+                zeroed_from = offset if zeroed_from is None else zeroed_from
+                continue
+            if zeroed_from is not None:
+                problems.append(f"damaged file: zeroed bytes at bytes {zeroed_from}-{offset - 1} skipped (a region overwritten with zeros)")
+                zeroed_from = None
             if isinstance(record, Chunk):
                 try:
                     inner = breakup_chunk(record, validate_crc=True)
@@ -828,7 +865,7 @@ def _open_scanning(path: Path, problems: list[str]) -> tuple[dict, dict]:
     attachments: dict = {}
     size = path.stat().st_size
     with open(path, "rb") as f:
-        records = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size).records
+        records = _DamageAwareReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size).records
         while True:
             try:
                 record = next(records)

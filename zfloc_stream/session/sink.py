@@ -53,13 +53,14 @@ class RecordSink:
     def error(self) -> BaseException | None:
         return self._error
 
-    def submit(self, batch: list[Record], close_chunk_first: bool) -> None:
-        """Queue (or write) one batch; raises the worker's failure if one happened."""
+    def submit(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False) -> None:
+        """Queue (or write) one batch; raises the worker's failure if one happened.
+        close_chunk_after: the chunk ends with this batch (a frame is complete)."""
         self._raise_pending()
         if self._queue is None:
-            self._apply(batch, close_chunk_first)
+            self._apply(batch, close_chunk_first, close_chunk_after)
         else:
-            self._queue.put((batch, close_chunk_first))  # blocks while max_pending are queued
+            self._queue.put((batch, close_chunk_first, close_chunk_after))  # blocks while max_pending are queued
 
     def finish(self) -> None:
         """Write everything queued, then the MCAP summary and footer."""
@@ -94,11 +95,13 @@ class RecordSink:
                 except BaseException as err:  # noqa: BLE001 - re-raised on the caller's thread
                     self._error = err
 
-    def _apply(self, batch: list[Record], close_chunk_first: bool) -> None:
+    def _apply(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False) -> None:
         if close_chunk_first:
             self._mcap.flush()  # finish the chunk in progress: bounds what a crash can lose
         for rec in batch:
             self._mcap.add_message(self._channel(rec), log_time=rec.log_time, data=rec.data, publish_time=rec.log_time, sequence=rec.sequence)
+        if close_chunk_after and batch:
+            self._mcap.flush()  # the frame just completed is in a finished chunk: a kill cannot lose it
         self._file.flush()  # finished chunks reach the OS: they survive a killed process
 
     def _channel(self, rec: Record) -> int:

@@ -223,13 +223,13 @@ class SessionWriter:
         self._frames_in_chunk += 1
         self.frames_written += 1
 
-    def _submit(self) -> None:
+    def _submit(self, close_after: bool = False) -> None:
         batch, self._batch = self._batch, []
         close, self._close_chunk_first = self._close_chunk_first, False
         for listener in self._listeners:
             listener(batch)
         try:
-            self._sink.submit(batch, close)
+            self._sink.submit(batch, close, close_after)
         except OSError as err:
             self._failed = True
             raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
@@ -286,7 +286,12 @@ class SessionWriter:
             if grid is not None:
                 self._write(S.TOPIC_BEV, S.grid_to_msg(grid, ns), ns, seq)
         self._write_json(S.TOPIC_STATUS, S.status_to_json(estimate), ns, seq)
-        self._submit()
+        # The frame is complete: once chunk_max_frames frames are in the chunk it ends
+        # here, not when the next frame begins, so a kill loses only frames in flight.
+        full = self._frames_in_chunk >= self._cfg.chunk_max_frames
+        if full:
+            self._frames_in_chunk = 0
+        self._submit(close_after=full)
 
     def _estimate_ns(self, estimate: Estimate) -> int:
         # Same log time as its frame's messages, even where float seconds cannot hold ns.

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import InputError, ZflocError
 from .cli_support import CliParser, install_warning_format, prepare_out_dir, print_warning
+from .signals import interrupted, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-stream demo                                   # apartment scene, seed 0, into ./zfloc-demo
@@ -116,6 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
     run.add_argument("--seg-model", metavar="ID_OR_DIR", help="semantic segmentation network for wall/floor/ceiling labels "
                      "(sets backbones.seg_model; needs the [torch] extra)")
+    run.add_argument("--salvage", action="store_true", help="an MCAP session cut off by a crash (or damaged): read it as far as its intact chunks go")
     _add_floorplan_options(run)
     _add_settings_args(run)
 
@@ -129,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     export.add_argument("session", type=Path, help="a session.mcap written by zfloc-stream run/demo or zfloc-replay")
     export.add_argument("--tum", type=Path, required=True, metavar="PATH", help="TUM file to write")
+    export.add_argument("--salvage", action="store_true", help="a session cut off by a crash (or damaged): read it as far as its intact chunks go")
 
     config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
     config.add_argument("--config", type=Path, help="YAML settings file")
@@ -233,7 +236,7 @@ def cmd_run(args) -> int:
     if args.floorplan is not None:
         floorplan = load_floorplan(args, settings)
     sequence = detect_source(args.input, floorplan=floorplan, odometry_noise=args.odometry_noise, seed=settings.seed,
-                             settings=settings, topics=topics)
+                             settings=settings, topics=topics, salvage=args.salvage)
     if sequence.settings_overrides:
         settings = _run_settings(args, sequence.settings_overrides)
     start, stop = 0, sequence.n_frames
@@ -311,7 +314,7 @@ def _report(outcome, settings) -> None:
 def cmd_export(args) -> int:
     from ..tum import export_session_tum, moved_note
 
-    out = export_session_tum(args.session, args.tum)
+    out = export_session_tum(args.session, args.tum, salvage=args.salvage)
     print(f"wrote {args.tum} ({out.rows} poses)")
     note = moved_note(args.tum, out.moved, out.rows)
     if note:
@@ -331,21 +334,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     install_warning_format()
     try:
-        if args.command == "demo":
-            return cmd_demo(args)
-        if args.command == "run":
-            return cmd_run(args)
-        if args.command == "config":
-            return cmd_config(args)
-        if args.command == "export":
-            return cmd_export(args)
-        return args.func(args)
+        with terminate_as_interrupt():  # SIGTERM closes the outputs as Ctrl-C does
+            if args.command == "demo":
+                return cmd_demo(args)
+            if args.command == "run":
+                return cmd_run(args)
+            if args.command == "config":
+                return cmd_config(args)
+            if args.command == "export":
+                return cmd_export(args)
+            return args.func(args)
     except ZflocError as err:
         print(f"zfloc-stream: error: {' '.join(str(err).split()) or type(err).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("zfloc-stream: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        return interrupted("zfloc-stream", err)
     except BrokenPipeError:  # output piped into e.g. head: not an error of ours
         import os
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..errors import InputError, SessionLogError, ZflocError
 from .cli_support import CliParser, Progress, install_warning_format
+from .signals import interrupted, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-replay session.mcap --check               # same decisions, numbers within tolerance? exit 0, else 1 + first divergence
@@ -143,6 +144,13 @@ def run(args) -> int:
     last = args.start + result.frames - 1
     if args.check:
         print(environment.describe(session.environment))
+        damage = [p for p in session.problems if p.startswith(("damaged file", "chunk skipped"))]
+        if result.divergence is not None and damage:
+            # frames are missing in the middle: the replay's state cannot continue across the
+            # gap, so what differs after it is the damage, not the code
+            where = damage[0].removeprefix("damaged file: ")
+            print(f"damaged file: {where}; the replay differs after it ({result.divergence}): not a replay difference")
+            return 2
         if result.divergence is not None:
             print(f"DIVERGED at {result.divergence}")
             return 1
@@ -166,13 +174,13 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     install_warning_format()
     try:
-        return run(args)
+        with terminate_as_interrupt():
+            return run(args)
     except ZflocError as err:
         print(f"zfloc-replay: error: {str(err).splitlines()[0] if str(err) else type(err).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("zfloc-replay: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        return interrupted("zfloc-replay", err)
     except BrokenPipeError:  # output piped into e.g. head: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0

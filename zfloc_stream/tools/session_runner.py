@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Settings
+from ..drops import DropCounter
 from ..errors import InputError
 from ..estimate import STATUSES, Estimate
 from ..floorplan import Floorplan
@@ -119,6 +120,7 @@ def run_session(
         frames = perception.stream(frames)
     estimates: list[Estimate] = []
     truths: list = []
+    drops = DropCounter(description)  # frames the localizer refused: warned once per cause
     lookup = TumStamps()  # the stamps trajectory.tum will carry: ground truth is looked up at them
     with ExitStack() as stack:
         stack.enter_context(localizer)  # stops a pipelined round worker, also when a frame source fails
@@ -144,9 +146,12 @@ def run_session(
             truth_writer.write_pose(est.timestamp, frame.ground_truth)
             if ros2_writer is not None:
                 ros2_writer.write(stamp, est, frame.ground_truth)
+            if est.skipped is not None:
+                drops.note(est.skipped, f"frame {index}")
             estimates.append(est)
             truths.append(frame.ground_truth)
             bar.update()
+    drops.summary()
     truth = None
     if any(t is not None for t in truths):
         truth = np.array([(np.nan,) * 3 if t is None else np.asarray(t, dtype=float)[:3] for t in truths]).reshape(-1, 3)
