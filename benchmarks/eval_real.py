@@ -51,6 +51,7 @@ from zfloc_stream.datasets.carmen import carmen_sequence, load_log
 from zfloc_stream.mapping import map_from_log
 from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
+from zfloc_stream.estimate import STATUSES
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors
 from zfloc_stream.sim2 import Sim2
@@ -96,7 +97,7 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     localizer.plane_poses = plane_poses
     errors = position_errors([e.pose for e in estimates], truth)
     row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),
-           "final_status": estimates[-1].status,
+           "final_status": estimates[-1].status, **frame_record(estimates, errors),
            "first_pose_frame": next((i for i, e in enumerate(estimates) if e.pose is not None), None)}
     if row["success"]:
         row["cause"] = ""
@@ -107,6 +108,30 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     else:
         row["cause"] = "wrong mode"
     return row, localizer
+
+
+def frame_record(estimates, errors) -> dict:
+    """Per-frame status, error and confidence of a window (for status_table)."""
+    return {"frame_status": [e.status for e in estimates],
+            "frame_errors": [float(v) if np.isfinite(v) else None for v in errors],
+            "frame_confidence": [float(getattr(e, "confidence", float("nan"))) for e in estimates]}
+
+
+def status_table(rows: list[dict]) -> str:
+    """Per frame, over every window: how often each status is within 1 m, and the share of
+    `tracking` frames 1 m or more off (what a caller acting on `tracking` meets)."""
+    status, errors = [], []
+    for r in rows:
+        status += r.get("frame_status", [])
+        errors += [np.inf if v is None else v for v in r.get("frame_errors", [])]
+    status, errors = np.array(status), np.array(errors, dtype=float)
+    lines = ["| status | frames | within 1 m | 1 m+ off | windows with a 1 m+ frame |", "|---|---|---|---|---|"]
+    for name in STATUSES:
+        mine = status == name
+        bad_windows = sum(any(s == name and (v is None or v >= 1.0) for s, v in zip(r.get("frame_status", []), r.get("frame_errors", [])))
+                          for r in rows)
+        lines.append(f"| {name} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} | {_pct(errors[mine] >= 1.0, 1)} | {bad_windows} |")
+    return "\n".join(lines)
 
 
 def reference_row(floorplan, points, frames, yaw_of) -> dict:
@@ -208,12 +233,13 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
     return row
 
 
-def _pct(values) -> str:
-    return f"{100 * np.mean(values):.0f}%" if len(values) else "-"
+def _pct(values, digits: int = 0) -> str:
+    return f"{100 * np.mean(values):.{digits}f}%" if len(values) else "-"
 
 
 def table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     return "\n\n".join(f"### {sensor}\n\n" + sensor_table([r for r in rows if r["sensor"] == sensor], lengths, reference)
+                       + "\n\nPer frame:\n\n" + status_table([r for r in rows if r["sensor"] == sensor])
                        for sensor in dict.fromkeys(r["sensor"] for r in rows))
 
 
