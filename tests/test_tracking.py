@@ -422,3 +422,21 @@ def test_assess_frame_never_upgrades_a_status_and_scales_confidence_by_confirmat
     assert status == "initializing" and confidence == pytest.approx(1 / 3)
     assert tracker.assess_frame(None, None, None)[0] == "initializing"
     assert np.isnan(HypothesisTracker().assess_frame(None, None, None)[1])
+
+
+@pytest.mark.parametrize("lost_rounds", [2, 3, 4])
+def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_lost_rounds_rounds(lost_rounds):
+    rng = make_rng(8, "reacquire")
+    tracker = HypothesisTracker(TrackingSettings(lost_rounds=lost_rounds))
+    run_rounds(tracker, 0, 6, lambda r: [seen(TRUE, rng, r, 0.8)])
+    run_rounds(tracker, 6, 20, lambda r: [seen(FAR, rng, r, 0.7)])  # the old alignment vanishes
+    assert tracker.status == "tracking"
+    tracker.declare_lost()  # the bank starts over after a loss; FAR must earn its place again
+    hits, statuses = [], []
+    for r in range(20, 26):
+        tracker.update([seen(FAR, rng, r, 0.7)], sensor_at(r), frame=5 * r)
+        hits.append(tracker.best.hits)
+        statuses.append(tracker.status)
+    required = max(lost_rounds, tracker.settings.confirm_rounds)
+    assert [s == "tracking" for s in statuses] == [h >= required for h in hits], (hits, statuses)
+    assert "lost" in statuses and statuses[-1] == "tracking"

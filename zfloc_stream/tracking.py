@@ -320,6 +320,15 @@ class HypothesisTracker:
         """Re-found near the top of confirm_rounds rounds: one round's best is not yet evidence."""
         return mode.hits >= self.settings.confirm_rounds
 
+    def rounds_to_track(self) -> int:
+        """Rounds a mode must have been re-found near the top before it is tracked:
+        confirm_rounds, and after a loss at least lost_rounds (the evidence it took to drop
+        a track is what it takes to trust the next one: right after a loss the map has
+        just shown it can fool the tracker; aces laser window 0 #100 re-acquired a mode
+        43 m off after two sightings and reported it `tracking` for 10 frames)."""
+        s = self.settings
+        return max(s.confirm_rounds, s.lost_rounds) if self._was_lost else s.confirm_rounds
+
     def has_close_rival(self, leader: Mode) -> bool:
         """Another confirmed mode carries at least ambiguity_ratio of the leader's weight:
         two established explanations compete."""
@@ -352,7 +361,7 @@ class HypothesisTracker:
             self._tracked_id, self._was_lost, self._status = None, True, "lost"
             return
         waiting: Status = "lost" if self._was_lost else "initializing"
-        if leader is None or not self.is_confirmed(leader):
+        if leader is None or leader.hits < self.rounds_to_track():
             self._tracked_id, self._status = None, waiting
         elif self.has_close_rival(leader):
             # A tracked mode stays the one reported (hysteresis) while a rival is only
