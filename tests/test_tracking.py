@@ -340,18 +340,18 @@ def test_with_nothing_tracked_a_clearly_better_newcomer_is_reported_before_it_is
 
 # --- the evidence behind `tracking` (issue 26) ----------------------------------------------
 def _leader_with_rival(dominance_weight: float, rounds: int = 8):
-    """TRUE scored 0.8 every round, a FAR rival 0.06 lower (near the top, so confirmed too,
-    but lighter than ambiguity_ratio of it: not a close rival)."""
+    """TRUE scored 0.8 every round, a FAR rival 0.12 lower (not near the top, never
+    confirmed, but carrying some of the weight)."""
     rng = make_rng(3, "dominance")
     tracker = HypothesisTracker(TrackingSettings(dominance_weight=dominance_weight))
-    statuses = run_rounds(tracker, 0, rounds, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.74)])
+    statuses = run_rounds(tracker, 0, rounds, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.68)])
     return tracker, statuses
 
 
 def test_tracking_needs_the_leader_to_carry_more_than_dominance_weight():
     tracker, statuses = _leader_with_rival(0.0)
     w = tracker.best.weight
-    assert 0.5 < w < 0.9 and statuses[-1] == "tracking"
+    assert 0.5 < w < 0.95 and statuses[-1] == "tracking"
     below, above = _leader_with_rival(w - 1e-6)[1], _leader_with_rival(w + 1e-6)[1]
     assert below[-1] == "tracking"
     assert above[-1] != "tracking"
@@ -440,3 +440,19 @@ def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_lost_rounds_round
     required = max(lost_rounds, tracker.settings.confirm_rounds)
     assert [s == "tracking" for s in statuses] == [h >= required for h in hits], (hits, statuses)
     assert "lost" in statuses and statuses[-1] == "tracking"
+
+
+@pytest.mark.parametrize("offset, tracked", [(-1e-3, False), (1e-3, True)])
+def test_a_mode_starts_tracking_only_when_no_rival_is_near_the_top_of_the_round(offset, tracked):
+    """A rival scoring just within confirm_score_gap of the leader (near the top too)
+    keeps it from starting to track; just outside, it does not."""
+    rng = make_rng(9, "singled")
+    tracker = HypothesisTracker(TrackingSettings())
+    gap = tracker.settings.confirm_score_gap
+    statuses = run_rounds(tracker, 0, 5, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.8 - gap - offset)])
+    assert tracker.dominates(tracker.best) and not tracker.has_close_rival(tracker.best)
+    assert tracker.singled_out(tracker.best) is tracked
+    assert ("tracking" in statuses) is tracked
+    if tracked:  # once tracked, a rival near the top is the collapse rule's business
+        tracker.update([seen(TRUE, rng, 5, 0.8), seen(FAR, rng, 5, 0.79)], sensor_at(5), frame=25)
+        assert not tracker.singled_out(tracker.best) and tracker.status == "tracking"
