@@ -37,6 +37,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -55,6 +56,9 @@ from zfloc_stream.datasets.carmen import carmen_sequence, load_log
 from zfloc_stream.mapping import map_from_log
 from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
+from zfloc_stream.estimate import STATUSES
+from zfloc_stream.frames import FLOOR, WALL
+from zfloc_stream.rng import make_rng
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors
 from zfloc_stream.plan_drawing import draw_plan, two_faces, write_plan_dxf
@@ -89,6 +93,85 @@ def world_of(log: str):
     return build_scene_from_floorplan(map_from_log(load_log(path, settings), [], settings), seed=0)
 
 
+# --- harder conditions (issue 26): each option is applied by one function here ----------------
+@dataclasses.dataclass(frozen=True)
+class Conditions:
+    """What a user's sensors bring beyond the default windows. drift multiplies the odometry
+    drift (laser: datasets.odometry noise and floors; camera: the simulator's per-step
+    translation and yaw noise). The rest are a monocular depth network's errors, applied to
+    camera frames only: a global depth scale per window uniform in [1 - e, 1 + e]
+    (depth_scale_error), a per-frame scale factor of std depth_scale_jitter, noise growing
+    with range (std depth_noise * depth^2, depth in m), and mislabelled pixels at
+    wall/floor borders (each pixel within 2 px of such a border takes the other label with
+    probability label_noise)."""
+
+    drift: float = 1.0
+    depth_scale_error: float = 0.0
+    depth_scale_jitter: float = 0.0
+    depth_noise: float = 0.0
+    label_noise: float = 0.0
+
+    def monocular(self) -> bool:
+        return any((self.depth_scale_error, self.depth_scale_jitter, self.depth_noise, self.label_noise))
+
+    def describe(self) -> str:
+        changed = [f"{f.name.replace('_', '-')} {getattr(self, f.name):g}" for f in dataclasses.fields(self)
+                   if getattr(self, f.name) != f.default]
+        return ", ".join(changed) or "default conditions"
+
+
+def drift_overrides(drift: float) -> list[str]:
+    """--set overrides that scale the laser windows' odometry drift (noise and both floors)."""
+    if drift == 1.0:
+        return []
+    odo = load_settings().datasets.odometry
+    return [f"datasets.odometry.noise={odo.noise * drift!r}",
+            f"datasets.odometry.translation_floor={odo.translation_floor * drift!r}",
+            f"datasets.odometry.heading_floor_deg={odo.heading_floor_deg * drift!r}"]
+
+
+def camera_settings(conditions: "Conditions | None") -> SimSettings:
+    """The simulated camera of the windows, its odometry drift scaled by conditions.drift."""
+    drift = 1.0 if conditions is None else conditions.drift
+    return CAMERA.model_copy(update={"odom_translation_noise": CAMERA.odom_translation_noise * drift,
+                                     "odom_yaw_noise_deg": CAMERA.odom_yaw_noise_deg * drift})
+
+
+def _border_band(labels: np.ndarray, width: int = 2) -> np.ndarray:
+    """Wall or floor pixels within `width` px (4-neighbourhood steps) of a wall/floor border."""
+    wall, floor = labels == WALL, labels == FLOOR
+    near_wall, near_floor = wall.copy(), floor.copy()
+    for _ in range(width):
+        for grown in (near_wall, near_floor):
+            g = grown.copy()
+            g[1:] |= grown[:-1]
+            g[:-1] |= grown[1:]
+            g[:, 1:] |= grown[:, :-1]
+            g[:, :-1] |= grown[:, 1:]
+            grown[:] = g
+    return (wall & near_floor) | (floor & near_wall)
+
+
+def monocular_frames(frames, conditions: Conditions, seed: int, log: str, start: int) -> list:
+    """Camera frames as a monocular depth + segmentation network would give them."""
+    rng = make_rng(seed, "monocular", log, start)
+    scale = 1.0 + rng.uniform(-conditions.depth_scale_error, conditions.depth_scale_error)
+    out = []
+    for f in frames:
+        depth = f.depth.astype(np.float64)
+        ok = np.isfinite(depth) & (depth > 0)
+        factor = scale * (1.0 + rng.normal(0.0, conditions.depth_scale_jitter)) if conditions.depth_scale_jitter else scale
+        noisy = depth * factor + rng.normal(0.0, 1.0, depth.shape) * conditions.depth_noise * depth**2
+        depth = np.where(ok, np.maximum(noisy, 0.0), depth).astype(np.float32)
+        labels = f.labels
+        if conditions.label_noise and labels is not None:
+            flip = _border_band(labels) & (rng.random(labels.shape) < conditions.label_noise)
+            labels = labels.copy()
+            labels[flip] = np.where(labels[flip] == WALL, FLOOR, WALL)
+        out.append(dataclasses.replace(f, depth=depth, labels=labels))
+    return out
+
+
 def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     """Push the frames through a fresh Localizer; success and where a failure came from."""
     truth = np.array([f.ground_truth for f in frames])
@@ -102,7 +185,7 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     localizer.plane_poses = plane_poses
     errors = position_errors([e.pose for e in estimates], truth)
     row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),
-           "final_status": estimates[-1].status,
+           "final_status": estimates[-1].status, **frame_record(estimates, errors),
            "first_pose_frame": next((i for i, e in enumerate(estimates) if e.pose is not None), None)}
     if row["success"]:
         row["cause"] = ""
@@ -113,6 +196,30 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     else:
         row["cause"] = "wrong mode"
     return row, localizer
+
+
+def frame_record(estimates, errors) -> dict:
+    """Per-frame status, error and confidence of a window (for status_table)."""
+    return {"frame_status": [e.status for e in estimates],
+            "frame_errors": [float(v) if np.isfinite(v) else None for v in errors],
+            "frame_confidence": [float(getattr(e, "confidence", float("nan"))) for e in estimates]}
+
+
+def status_table(rows: list[dict]) -> str:
+    """Per frame, over every window: how often each status is within 1 m, and the share of
+    `tracking` frames 1 m or more off (what a caller acting on `tracking` meets)."""
+    status, errors = [], []
+    for r in rows:
+        status += r.get("frame_status", [])
+        errors += [np.inf if v is None else v for v in r.get("frame_errors", [])]
+    status, errors = np.array(status), np.array(errors, dtype=float)
+    lines = ["| status | frames | within 1 m | 1 m+ off | windows with a 1 m+ frame |", "|---|---|---|---|---|"]
+    for name in STATUSES:
+        mine = status == name
+        bad_windows = sum(any(s == name and (v is None or v >= 1.0) for s, v in zip(r.get("frame_status", []), r.get("frame_errors", [])))
+                          for r in rows)
+        lines.append(f"| {name} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} | {_pct(errors[mine] >= 1.0, 1)} | {bad_windows} |")
+    return "\n".join(lines)
 
 
 def reference_row(floorplan, points, frames, yaw_of) -> dict:
@@ -179,10 +286,11 @@ class _Posed:
 
 
 def run_window(log: str, start: int, length: int, seed: int, overrides: list[str], reference: bool, camera: bool = False,
-               localize: bool = True, plan_style: str | None = None) -> dict:
+               localize: bool = True, conditions: Conditions | None = None, plan_style: str | None = None) -> dict:
     """One window's row. localize=False: the laser reference alone (it does not depend on
     the localizer, so --reference-cache keeps it across runs). plan_style: localize (and
-    search) against the held-out map redrawn as a plan (plan_window)."""
+    search) against the held-out map redrawn as a plan (plan_window). conditions: the camera's
+    drift and monocular errors (the laser's drift comes in as datasets.odometry overrides)."""
     path = DATA / f"{log}-corrected.log.gz"
     stop = start + length
     row = {"log": log, "start": start, "length": length, "seed": seed, "sensor": "camera" if camera else "laser"}
@@ -191,7 +299,9 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         seq = carmen_sequence(path, settings)
         floorplan = seq.floorplan_for(start, stop)
         truth = seq.ground_truth[start:stop]
-        frames = simulate(world_of(log), CAMERA, seed=seed + start, trajectory=truth).frames
+        frames = simulate(world_of(log), camera_settings(conditions), seed=seed + start, trajectory=truth).frames
+        if conditions is not None and conditions.monocular():
+            frames = monocular_frames(frames, conditions, seed, log, start)
         if plan_style:
             row.update(plan_window(floorplan, frames, settings, true_hits(seq.frames(start, stop))))
             floorplan = plan_of(floorplan, settings, plan_style)
@@ -286,12 +396,13 @@ def plan_style_main(args, jobs: list, lengths: list[int]) -> int:
     return 0
 
 
-def _pct(values) -> str:
-    return f"{100 * np.mean(values):.0f}%" if len(values) else "-"
+def _pct(values, digits: int = 0) -> str:
+    return f"{100 * np.mean(values):.{digits}f}%" if len(values) else "-"
 
 
 def table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     return "\n\n".join(f"### {sensor}\n\n" + sensor_table([r for r in rows if r["sensor"] == sensor], lengths, reference)
+                       + "\n\nPer frame:\n\n" + status_table([r for r in rows if r["sensor"] == sensor])
                        for sensor in dict.fromkeys(r["sensor"] for r in rows))
 
 
@@ -340,6 +451,35 @@ def _map(fn, jobs: list, workers: int) -> list:
     return [fn(*job) for job in jobs]
 
 
+def add_condition_options(parser: argparse.ArgumentParser) -> None:
+    """The harder conditions of issue 26 (see Conditions)."""
+    group = parser.add_argument_group("conditions (what real users bring)")
+    group.add_argument("--drift", type=float, default=1.0, metavar="X",
+                       help="odometry drift multiplier (3: 6%% of each step + 15 mm, 6%% of each turn + 0.9 deg on laser)")
+    group.add_argument("--depth-scale-error", type=float, default=0.0, metavar="E",
+                       help="camera: global depth scale per window uniform in [1-E, 1+E] (a monocular network's)")
+    group.add_argument("--depth-scale-jitter", type=float, default=0.0, metavar="J",
+                       help="camera: per-frame depth scale factor with std J")
+    group.add_argument("--depth-noise", type=float, default=0.0, metavar="N",
+                       help="camera: depth noise growing with range, std N * depth^2")
+    group.add_argument("--label-noise", type=float, default=0.0, metavar="P",
+                       help="camera: pixels within 2 px of a wall/floor border take the other label with probability P")
+
+
+def parse_conditions(parser: argparse.ArgumentParser, args) -> Conditions:
+    values = {"drift": args.drift, "depth_scale_error": args.depth_scale_error, "depth_scale_jitter": args.depth_scale_jitter,
+              "depth_noise": args.depth_noise, "label_noise": args.label_noise}
+    bad = [k for k, v in values.items() if not np.isfinite(v) or v < 0]
+    if bad or args.drift <= 0:
+        parser.error(f"--{(bad or ['drift'])[0].replace('_', '-')} must be a finite number > 0 (drift) or >= 0 (the rest)")
+    if args.depth_scale_error >= 1 or args.label_noise > 1:
+        parser.error("--depth-scale-error must be < 1 and --label-noise at most 1")
+    conditions = Conditions(**values)
+    if conditions.monocular() and not args.camera:
+        parser.error("--depth-scale-error, --depth-scale-jitter, --depth-noise and --label-noise apply to camera windows: add --camera")
+    return conditions
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--logs", default=",".join(LOGS))
@@ -360,7 +500,10 @@ def main(argv=None) -> int:
     parser.add_argument("--plan-style", nargs="?", const="one-face", choices=PLAN_STYLES,
                         help="localize against each held-out map redrawn as an architect's DXF plan (one line per wall, "
                              "or two-face: both faces of each wall), beside the raster map on the same windows")
+    add_condition_options(parser)
     args = parser.parse_args(argv)
+    conditions = parse_conditions(parser, args)
+    args.set = list(args.set) + drift_overrides(conditions.drift)
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
     logs = [s for s in args.logs.split(",") if s]
@@ -398,7 +541,7 @@ def main(argv=None) -> int:
         return 0
     cache = _read_cache(args.reference_cache)
     missing = [j for j in jobs if j[5] and not j[6] and _cache_key(j) not in cache] if args.reference_cache else []
-    rows = _map(run_window, [(*j, False) for j in missing], args.workers)
+    rows = _map(run_window, [(*j, False, conditions) for j in missing], args.workers)
     cache.update({_cache_key(j): {k: r[k] for k in r if k.startswith("ref_")} for j, r in zip(missing, rows)})
     if args.reference_cache and missing:
         args.reference_cache.write_text(json.dumps(cache, indent=1, sort_keys=True))
@@ -407,10 +550,11 @@ def main(argv=None) -> int:
         return 0
     # cached laser references are not recomputed; camera references need the localizer's BEV
     jobs = [(*j[:5], j[5] and (j[6] or _cache_key(j) not in cache), j[6]) for j in jobs]
-    rows = _map(run_window, jobs, args.workers)
+    rows = _map(run_window, [(*j, True, conditions) for j in jobs], args.workers)
     for j, r in zip(jobs, rows):
         if not r["sensor"] == "camera" and _cache_key(j) in cache:
             r.update(cache[_cache_key(j)])
+    print(f"Conditions: {conditions.describe()}\n")
     print(table(rows, lengths, not args.no_reference))
     print(f"\n{len(rows)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     if args.json:

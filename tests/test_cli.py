@@ -67,6 +67,6 @@ def test_short_demo_writes_its_files(tmp_path):
     for name in ("trajectory.csv", "overlay.png", "session.mcap"):
         assert (out / name).stat().st_size > 0
     rows = (out / "trajectory.csv").read_text().splitlines()
-    assert rows[0] == "frame,timestamp,x,y,theta,scale,score,n_hypotheses,status"
+    assert rows[0] == "frame,timestamp,x,y,theta,scale,score,n_hypotheses,status,confidence"
     assert len(rows) == 13
     assert "final status" in proc.stdout

@@ -201,3 +201,37 @@ def test_the_reported_scale_follows_the_rounds_not_the_first_local_fit():
     truth = 1.0 / seq.scale
     assert abs(scales[-1] / truth - 1.0) < 0.015
     assert len({round(s, 6) for s in scales[20:]}) > 1  # it moves with the rounds
+
+
+class _Spiked:
+    """Frames whose odometry spikes by `shift` at frame k0 only (one bad reading), or from
+    k0 on (persist=True)."""
+
+    def __init__(self, seq, k0, shift=(1000.0, 0.0), persist=False):
+        self.seq, self.k0, self.persist = seq, k0, persist
+        self.jump = np.eye(4)
+        self.jump[:2, 3] = shift
+
+    def __iter__(self):
+        for k, frame in enumerate(self.seq):
+            spiked = k == self.k0 or (self.persist and k > self.k0)
+            yield replace(frame, T_odom_cam=self.jump @ frame.T_odom_cam) if spiked else frame
+
+
+@pytest.mark.parametrize("persist", [False, True])
+def test_an_odometry_spike_is_never_reported_as_tracking(persist):
+    """Issue 29: a 1 km odometry spike was reported 998 m off with status tracking. The
+    frame's own wall hits, placed by the spiked pose, are explained by no wall."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=40)
+    k0 = 33
+    _, est = _run(scene, _Spiked(seq, k0, persist=persist))
+    assert est[k0 - 1].status == "tracking" and est[k0 - 1].confidence > 0.5
+    err = np.linalg.norm(est[k0].pose[:2] - seq.poses[k0][:2])
+    assert err > 900  # the pose follows the odometry...
+    assert est[k0].status == "lost" and est[k0].confidence == 0.0  # ...but is not claimed
+    if not persist:  # the next frame is back where its hits fit
+        assert est[k0 + 1].status == "tracking" and est[k0 + 1].confidence > 0.5
+    else:
+        bad = [e.status for e, p in zip(est[k0:], seq.poses[k0:]) if np.linalg.norm(e.pose[:2] - p[:2]) >= 1.0]
+        assert "tracking" not in bad

@@ -336,3 +336,123 @@ def test_with_nothing_tracked_a_clearly_better_newcomer_is_reported_before_it_is
         tracker.update([seen(TRUE, rng, 2, 0.05 + gain), seen(MIRROR, rng, 2, 0.05), seen(FAR, rng, 2, 0.04)], sensor_at(2), frame=10)
         assert tracker.status != "tracking"
         assert implied_error(tracker.best.alignment, reported, sensor_at(2)) < 0.3
+
+
+# --- the evidence behind `tracking` (issue 26) ----------------------------------------------
+def _leader_with_rival(dominance_weight: float, rounds: int = 8):
+    """TRUE scored 0.8 every round, a FAR rival 0.12 lower (not near the top, never
+    confirmed, but carrying some of the weight)."""
+    rng = make_rng(3, "dominance")
+    tracker = HypothesisTracker(TrackingSettings(dominance_weight=dominance_weight))
+    statuses = run_rounds(tracker, 0, rounds, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.68)])
+    return tracker, statuses
+
+
+def test_tracking_needs_the_leader_to_carry_more_than_dominance_weight():
+    tracker, statuses = _leader_with_rival(0.0)
+    w = tracker.best.weight
+    assert 0.5 < w < 0.95 and statuses[-1] == "tracking"
+    below, above = _leader_with_rival(w - 1e-6)[1], _leader_with_rival(w + 1e-6)[1]
+    assert below[-1] == "tracking"
+    assert above[-1] != "tracking"
+
+
+def test_a_tracked_mode_losing_its_dominance_is_ambiguous_and_keeps_its_place():
+    rng = make_rng(4, "dominance")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, 5, lambda r: [seen(TRUE, rng, r, 0.8)])
+    assert tracker.status == "tracking"
+    tracked = tracker.best.id
+    # newcomers scoring as well as it (each its own mode, none confirmed yet) split the weight
+    rivals = [Sim2(1.0, 0.3 * k, (10.0 * k, -5.0 * k)) for k in range(1, 4)]
+    tracker.update([seen(TRUE, rng, 5, 0.8)] + [seen(a, rng, 5, 0.8) for a in rivals], sensor_at(5), frame=25)
+    assert not tracker.dominates(tracker.best) and tracker.best.weight <= 0.5
+    assert tracker.status == "ambiguous" and tracker.best.id == tracked
+
+
+def test_before_anything_was_tracked_a_leader_without_dominance_is_initializing():
+    rng = make_rng(5, "dominance")
+    tracker = HypothesisTracker(TrackingSettings(dominance_weight=0.99))
+    statuses = run_rounds(tracker, 0, 4, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.7)])
+    assert statuses == ["initializing"] * 4
+
+
+def _tracked(rounds: int = 6):
+    rng = make_rng(6, "frame")
+    tracker = HypothesisTracker(TrackingSettings())
+    run_rounds(tracker, 0, rounds, lambda r: [seen(TRUE, rng, r, 0.8)])
+    assert tracker.status == "tracking"
+    return tracker, sensor_at(rounds - 1)
+
+
+def _shifted(alignment: Sim2, dx: float) -> Sim2:
+    return Sim2(1.0, 0.0, (dx, 0.0)) @ alignment
+
+
+def test_pose_jump_at_the_gate_boundary():
+    tracker, sensor = _tracked()
+    a = tracker.best.alignment
+    cov = tracker.pose_covariance(sensor) + np.diag([0.15**2, 0.15**2, np.deg2rad(2.0) ** 2])
+    gate_dx = np.sqrt(tracker.settings.gate_chi2 / np.linalg.inv(cov)[0, 0])
+    assert not tracker.pose_jumped(a, _shifted(a, 0.99 * gate_dx), sensor)
+    assert tracker.pose_jumped(a, _shifted(a, 1.01 * gate_dx), sensor)
+    # odometry moving the sensor is carried by the alignment: no jump, however far
+    assert not tracker.pose_jumped(a, a, sensor + np.array([1000.0, 0.0]))
+
+
+def test_assess_frame_withholds_tracking_when_the_frames_evidence_contradicts_the_pose():
+    tracker, sensor = _tracked()
+    a = tracker.best.alignment
+    status, confidence = tracker.assess_frame(a, sensor, True)
+    assert status == "tracking" and confidence == pytest.approx(tracker.best.weight)
+    assert tracker.assess_frame(a, sensor, None)[0] == "tracking"  # too few hits to judge: no verdict
+    assert tracker.assess_frame(a, sensor, False) == ("lost", 0.0)  # its hits are not explained
+    assert tracker.assess_frame(a, sensor, True)[0] == "tracking"  # one frame's verdict, not the round's
+    assert tracker.status == "tracking"
+    jumped = _shifted(a, 5.0)
+    assert tracker.assess_frame(jumped, sensor, True) == ("lost", 0.0)
+    assert tracker.assess_frame(jumped, sensor, True)[0] == "tracking"  # the next frame steps from there
+
+
+def test_assess_frame_never_upgrades_a_status_and_scales_confidence_by_confirmation():
+    rng = make_rng(7, "frame")
+    tracker = HypothesisTracker(TrackingSettings(confirm_rounds=3))
+    tracker.update([seen(TRUE, rng, 0, 0.8)], sensor_at(0), frame=0)
+    status, confidence = tracker.assess_frame(tracker.best.alignment, sensor_at(0), True)
+    assert status == "initializing" and confidence == pytest.approx(1 / 3)
+    assert tracker.assess_frame(None, None, None)[0] == "initializing"
+    assert np.isnan(HypothesisTracker().assess_frame(None, None, None)[1])
+
+
+@pytest.mark.parametrize("lost_rounds", [2, 3, 4])
+def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_lost_rounds_rounds(lost_rounds):
+    rng = make_rng(8, "reacquire")
+    tracker = HypothesisTracker(TrackingSettings(lost_rounds=lost_rounds))
+    run_rounds(tracker, 0, 6, lambda r: [seen(TRUE, rng, r, 0.8)])
+    run_rounds(tracker, 6, 20, lambda r: [seen(FAR, rng, r, 0.7)])  # the old alignment vanishes
+    assert tracker.status == "tracking"
+    tracker.declare_lost()  # the bank starts over after a loss; FAR must earn its place again
+    hits, statuses = [], []
+    for r in range(20, 26):
+        tracker.update([seen(FAR, rng, r, 0.7)], sensor_at(r), frame=5 * r)
+        hits.append(tracker.best.hits)
+        statuses.append(tracker.status)
+    required = max(lost_rounds, tracker.settings.confirm_rounds)
+    assert [s == "tracking" for s in statuses] == [h >= required for h in hits], (hits, statuses)
+    assert "lost" in statuses and statuses[-1] == "tracking"
+
+
+@pytest.mark.parametrize("offset, tracked", [(-1e-3, False), (1e-3, True)])
+def test_a_mode_starts_tracking_only_when_no_rival_is_near_the_top_of_the_round(offset, tracked):
+    """A rival scoring just within confirm_score_gap of the leader (near the top too)
+    keeps it from starting to track; just outside, it does not."""
+    rng = make_rng(9, "singled")
+    tracker = HypothesisTracker(TrackingSettings())
+    gap = tracker.settings.confirm_score_gap
+    statuses = run_rounds(tracker, 0, 5, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.8 - gap - offset)])
+    assert tracker.dominates(tracker.best) and not tracker.has_close_rival(tracker.best)
+    assert tracker.singled_out(tracker.best) is tracked
+    assert ("tracking" in statuses) is tracked
+    if tracked:  # once tracked, a rival near the top is the collapse rule's business
+        tracker.update([seen(TRUE, rng, 5, 0.8), seen(FAR, rng, 5, 0.79)], sensor_at(5), frame=25)
+        assert not tracker.singled_out(tracker.best) and tracker.status == "tracking"

@@ -409,6 +409,7 @@ class TrackingSettings(Section):
     confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within confirm_score_gap) before it can be tracked
     confirm_score_gap: float = Field(0.1, ge=0, le=10)  # "near the top": a fresh score within this of the round's best
     ambiguity_ratio: float = Field(0.5, gt=0, le=1)  # a second confirmed mode with weight >= this * best: ambiguous
+    dominance_weight: float = Field(0.5, ge=0, lt=1)  # tracking needs the best mode's share of the weight above this (0.5: more than all rivals together)
     lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
     lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking

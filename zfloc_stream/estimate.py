@@ -36,6 +36,10 @@ class Estimate:
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage for this push
     skipped: str | None = None  # reason when the frame was rejected and not fused
     round_skipped: str | None = None  # why the round due at this frame did not run (None: ran, or none due)
+    # in [0, 1], for a caller to threshold: the reported mode's share of the tracker's weight,
+    # scaled by its confirmation, 0 when the frame's own evidence contradicts the pose
+    # (tracking.HypothesisTracker.assess_frame); nan before any pose
+    confidence: float = float("nan")
 
     @property
     def scale(self) -> float:

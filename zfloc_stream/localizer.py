@@ -358,14 +358,23 @@ class Localizer:
         distances = self.floorplan.distance(alignment.apply(points))
         return float(np.mean(distances < self.settings.localizer.monitor_distance))
 
+    def _frame_consistent(self, alignment: Sim2) -> bool | None:
+        """Does the alignment explain the last fused frame's wall hits (at least
+        monitor_min_consistency of them within monitor_distance of a wall)? None: too few
+        hits to judge."""
+        cfg = self.settings.localizer
+        points = self.bev.last_wall_hits
+        if len(points) < cfg.monitor_min_points:
+            return None
+        points = points[:: max(1, len(points) // cfg.monitor_max_points)]
+        return self._explained(alignment, points) >= cfg.monitor_min_consistency
+
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""
         cfg = self.settings.localizer
-        points = self.bev.last_wall_hits
-        if self.tracker.status != "tracking" or len(points) < cfg.monitor_min_points:
+        consistent = None if self.tracker.status != "tracking" else self._frame_consistent(self.tracker.best.alignment)
+        if consistent is None:
             return
-        points = points[:: max(1, len(points) // cfg.monitor_max_points)]
-        consistent = self._explained(self.tracker.best.alignment, points) >= cfg.monitor_min_consistency
         self._inconsistent_frames = 0 if consistent else self._inconsistent_frames + 1
         if self._inconsistent_frames >= cfg.monitor_frames:
             self._inconsistent_frames = 0
@@ -374,7 +383,6 @@ class Localizer:
 
     # ------------------------------------------------------------------------------
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:
-        status = self.tracker.status
         best = self.tracker.best
         if best is None or plane_pose is None:
             pose = cov = alignment = None
@@ -385,8 +393,12 @@ class Localizer:
             pose = np.array(alignment.apply_pose(*plane_pose))
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
+        # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
+        consistent = None if alignment is None else self._frame_consistent(alignment)
+        status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose
             first = alternatives[0]
             alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]
-        return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped)
+        return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped,
+                        confidence)

@@ -21,7 +21,8 @@ running score - `unobserved_penalty` when not): w_i = softmax(weight_gain * runn
 Decisions are relative, never absolute score levels (those depend on the map's style):
 the round's best hypothesis always starts a mode (so the first round already gives a
 pose), others only within birth_score_gap of it; a mode is confirmed once it was found
-near the top in confirm_rounds rounds; the tracked mode collapses in a round when a rival
+near the top in confirm_rounds rounds and tracked while no confirmed rival comes close
+and it holds more than dominance_weight of the weight; the tracked mode collapses in a round when a rival
 hypothesis beats it by lost_score_gap (or nothing matches it) and is lost after lost_rounds
 collapses in a row. Deterministic: no randomness, ties broken by input order.
 """
@@ -82,6 +83,7 @@ class Mode:
     hits: int = 1  # rounds in which it was found near the top (within confirm_score_gap of the round's best)
     collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
     tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
+    near_top: bool = True  # found near the top (within confirm_score_gap of the best) in the latest round
 
     @property
     def state(self) -> np.ndarray:
@@ -132,6 +134,7 @@ class HypothesisTracker:
         self._tracked_id: int | None = None
         self._was_lost = False
         self._status: Status = "initializing"
+        self._last_reported: Sim2 | None = None  # the alignment assess_frame saw last
 
     def declare_lost(self) -> None:
         """Drop every mode and report lost: the localizer saw the tracked alignment stop
@@ -168,7 +171,7 @@ class HypothesisTracker:
             mode.age += 1
         for j in range(len(hyps)):
             if not explained[j] and (j == 0 or scores[j] >= scores[0] - self.settings.birth_score_gap):
-                self._birth(meas[j], scores[j], sensor)
+                self._birth(meas[j], scores[j], sensor, near_top=scores[j] >= scores[0] - self.settings.confirm_score_gap)
         self._merge()
         self._reweight_and_prune()
         self._update_status()
@@ -242,6 +245,7 @@ class HypothesisTracker:
 
     def _score_mode(self, mode: Mode, j: int | None, meas, scores) -> None:
         s = self.settings
+        mode.near_top = False
         if j is None:
             fresh = mode.running_score - s.unobserved_penalty
             # Unseen while the round found something: the evidence moved elsewhere.
@@ -252,21 +256,21 @@ class HypothesisTracker:
             mode.kf.update(z.reshape(4, 1), R=self._meas_cov)
             mode.kf.x[2, 0] = wrap_angle(mode.kf.x[2, 0])
             mode.score = fresh
-            near_top = fresh >= scores[0] - s.confirm_score_gap
-            mode.hits += 1 if near_top else 0
+            mode.near_top = fresh >= scores[0] - s.confirm_score_gap
+            mode.hits += 1 if mode.near_top else 0
             # scores[0] is another hypothesis whenever j > 0 (each matches one mode)
             collapsed = j > 0 and scores[0] - fresh > s.lost_score_gap
             mode.collapses = mode.collapses + 1 if collapsed else 0
         mode.running_score = (1.0 - s.score_smoothing) * mode.running_score + s.score_smoothing * fresh
 
-    def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray) -> None:
+    def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray, near_top: bool = True) -> None:
         kf = KalmanFilter(dim_x=4, dim_z=4)
         kf.x = z.reshape(4, 1).copy()
         kf.P = self._meas_cov.copy()  # one measurement is all it knows
         kf.F = np.eye(4)
         kf.H = np.eye(4)
         kf.R = self._meas_cov.copy()
-        self.modes.append(Mode(self._next_id, kf, sensor.copy(), score, score))
+        self.modes.append(Mode(self._next_id, kf, sensor.copy(), score, score, near_top=near_top))
         self._next_id += 1
 
     def _merge(self) -> None:
@@ -289,6 +293,7 @@ class HypothesisTracker:
                 twin.hits = max(twin.hits, mode.hits)
                 twin.age = max(twin.age, mode.age)
                 twin.tracked_rounds = max(twin.tracked_rounds, mode.tracked_rounds)
+                twin.near_top = twin.near_top or mode.near_top
                 if mode.id == self._tracked_id:
                     self._tracked_id = twin.id
         self.modes = sorted(keep, key=lambda m: m.id)
@@ -312,6 +317,44 @@ class HypothesisTracker:
             mode.weight = float(wi)
 
     # --- status -----------------------------------------------------------------------
+    # Each decision that may withhold `tracking` is one function below; _update_status
+    # (per round) and assess_frame (per frame) only combine them.
+    def is_confirmed(self, mode: Mode) -> bool:
+        """Re-found near the top of confirm_rounds rounds: one round's best is not yet evidence."""
+        return mode.hits >= self.settings.confirm_rounds
+
+    def rounds_to_track(self) -> int:
+        """Rounds a mode must have been re-found near the top before it is tracked:
+        confirm_rounds, and after a loss at least lost_rounds (the evidence it took to drop
+        a track is what it takes to trust the next one: right after a loss the map has
+        just shown it can fool the tracker; aces laser window 0 #100 re-acquired a mode
+        43 m off after two sightings and reported it `tracking` for 10 frames)."""
+        s = self.settings
+        return max(s.confirm_rounds, s.lost_rounds) if self._was_lost else s.confirm_rounds
+
+    def has_close_rival(self, leader: Mode) -> bool:
+        """Another confirmed mode carries at least ambiguity_ratio of the leader's weight:
+        two established explanations compete."""
+        return any(
+            m is not leader and self.is_confirmed(m) and m.weight >= self.settings.ambiguity_ratio * leader.weight
+            for m in self.modes
+        )
+
+    def singled_out(self, leader: Mode) -> bool:
+        """No other mode was found near the top of the latest round: the round points at
+        the leader alone. Asked only before a mode starts to be tracked (a tracked mode
+        meeting a rival near the top is the collapse rule's business). belgioioso camera
+        session: a mode 16 m off was confirmed in round 2 with a fresh score of 0.132
+        against a new rival's 0.125, its running score carried by round 1 alone."""
+        return not any(m is not leader and m.near_top for m in self.modes)
+
+    def dominates(self, leader: Mode) -> bool:
+        """The leader's share of the bank's weight exceeds dominance_weight (0.5: it
+        outweighs all its rivals together, confirmed or not). Many newcomers that each
+        score close to it mean the data do not single it out yet (held-out laser windows:
+        a reported mode 15-60 m off had 0.3-0.45 of the weight, spread over 8 modes)."""
+        return leader.weight > self.settings.dominance_weight
+
     def _update_status(self) -> None:
         s = self.settings
         tracked = self._mode_by_id(self._tracked_id)
@@ -328,14 +371,16 @@ class HypothesisTracker:
                 tracked.collapses = 0
             self._tracked_id, self._was_lost, self._status = None, True, "lost"
             return
-        confirmed = [m for m in self.modes if m.hits >= s.confirm_rounds]
         waiting: Status = "lost" if self._was_lost else "initializing"
-        if leader is None or leader.hits < s.confirm_rounds:
+        if leader is None or leader.hits < self.rounds_to_track():
             self._tracked_id, self._status = None, waiting
-        elif any(m is not leader and m.weight >= s.ambiguity_ratio * leader.weight for m in confirmed):
+        elif self.has_close_rival(leader):
             # A tracked mode stays the one reported (hysteresis) while a rival is only
             # as good; before any mode was tracked, nothing is.
             self._status = "ambiguous"
+        elif not self.dominates(leader) or (self._tracked_id != leader.id and not self.singled_out(leader)):
+            # thin evidence: a tracked mode keeps its place (as above), an untracked one waits
+            self._status = "ambiguous" if self._tracked_id is not None else waiting
         else:
             if self._tracked_id != leader.id:
                 leader.tracked_rounds = 0
@@ -344,6 +389,43 @@ class HypothesisTracker:
         for mode in self.modes:
             if mode.id != self._tracked_id:
                 mode.tracked_rounds = 0
+
+    # --- per frame --------------------------------------------------------------------
+    def pose_jumped(self, previous: Sim2 | None, current: Sim2 | None, sensor_xy, mode: Mode | None = None) -> bool:
+        """The reported pose of the sensor moved, beyond what odometry carries it, by more
+        than the tracker allows: the change of the reported alignment at the sensor (x, y,
+        theta) lies outside gate_chi2 under the mode's pose covariance plus one
+        measurement's. The alignment only changes in a round (a gated filter update, or a
+        switch to another mode) and in the local refinement; odometry moves the sensor in
+        the plane and is carried by the alignment unchanged, so it never counts here."""
+        mode = mode if mode is not None else self.best
+        if previous is None or current is None or mode is None:
+            return False
+        sensor = np.asarray(sensor_xy, dtype=float).reshape(2)
+        step = np.append(current.apply(sensor) - previous.apply(sensor), wrap_angle(current.theta - previous.theta))
+        cov = self.pose_covariance(sensor, mode=mode) + self._meas_cov[:3, :3]
+        return float(step @ np.linalg.solve(cov, step)) > self.settings.gate_chi2
+
+    def assess_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None) -> tuple[Status, float]:
+        """(status, confidence) of one frame's reported pose.
+
+        status: the round's status, except that a `tracking` frame whose own evidence
+        contradicts the pose is reported `lost`: its wall hits are not explained by the
+        reported alignment (frame_consistent False, the localizer's monitor; an odometry
+        spike or jump lands here), or the pose jumped (pose_jumped).
+
+        confidence in [0, 1], for a caller to threshold: the reported mode's share of the
+        bank's weight, scaled by how far it is confirmed (hits / confirm_rounds, at most
+        1), and 0 on a frame whose evidence contradicts it. nan before any mode.
+        """
+        best = self.best
+        previous, self._last_reported = self._last_reported, alignment
+        if best is None or alignment is None or sensor_xy is None:
+            return self._status, float("nan")
+        contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
+        status: Status = "lost" if contradicted and self._status == "tracking" else self._status
+        confirmation = min(1.0, best.hits / self.settings.confirm_rounds)
+        return status, 0.0 if contradicted else float(best.weight * confirmation)
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:
         return next((m for m in self.modes if m.id == mode_id), None)
@@ -359,8 +441,11 @@ class HypothesisTracker:
                      still reported.
         initializing no round yet, BEV not ready, or no confirmed mode yet (never tracked
                      before); the best mode's pose is reported from the first round on
-        ambiguous    another confirmed mode has weight >= ambiguity_ratio * best's
-        tracking     one confirmed mode dominates
+        ambiguous    another confirmed mode has weight >= ambiguity_ratio * best's, or
+                     the tracked mode's share of the weight fell to dominance_weight
+        tracking     one confirmed mode dominates: no close confirmed rival and more than
+                     dominance_weight of the weight. Per frame, assess_frame also
+                     withholds it when the frame's own evidence contradicts the pose.
         """
         return self._status
 

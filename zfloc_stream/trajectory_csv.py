@@ -1,8 +1,9 @@
 """trajectory.csv: one row per pushed frame (public contract, DESIGN.md).
 
 Rows are flushed as they are written so a crash loses at most the frame in flight.
-Columns: frame, timestamp, x, y, theta, scale, score, n_hypotheses, status. Before the
-first hypothesis x, y, theta, scale and score are empty.
+Columns: frame, timestamp, x, y, theta, scale, score, n_hypotheses, status, confidence.
+Before the first hypothesis x, y, theta, scale, score and confidence are empty. New
+columns are only ever appended (readers index by name or by the first nine positions).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from .estimate import Estimate
 
-COLUMNS = ("frame", "timestamp", "x", "y", "theta", "scale", "score", "n_hypotheses", "status")
+COLUMNS = ("frame", "timestamp", "x", "y", "theta", "scale", "score", "n_hypotheses", "status", "confidence")
 
 
 def _num(value: float) -> str:
@@ -33,6 +34,7 @@ def estimate_row(est: Estimate) -> list[str]:
         _num(est.score),
         str(est.n_hypotheses),
         est.status,
+        _num(est.confidence),
     ]
 
 

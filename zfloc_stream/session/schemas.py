@@ -392,6 +392,7 @@ STATUS_JSON_SCHEMA = {
         "skipped": {"type": ["string", "null"]},
         "round_skipped": {"type": "string"},
         "timings": {"type": "object", "additionalProperties": {"type": "number"}},
+        "confidence": {**_NUM, "minimum": 0, "maximum": 1},
     },
     "required": ["frame", "timestamp", "status"],
 }
@@ -429,6 +430,7 @@ def status_to_json(est: Estimate) -> dict:
         ],
         "skipped": est.skipped,
         "timings": {str(k): float(v) for k, v in est.timings.items()},
+        "confidence": _num(est.confidence),  # appended (issue 26); older files lack it
     }
     if est.round_skipped is not None:  # only where a due round did not run (older files lack the key)
         status["round_skipped"] = est.round_skipped
@@ -486,6 +488,7 @@ def estimate_from_status(status: dict) -> Estimate:
             {str(k): float(v) for k, v in (status.get("timings") or {}).items()},
             status.get("skipped"),
             status.get("round_skipped"),
+            _f(status.get("confidence")),
         )
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
         raise SessionLogError(f"status JSON is malformed ({type(err).__name__}: {err})") from None
