@@ -205,7 +205,7 @@ def test_overlay_marks_the_start_colours_the_path_by_status_and_names_every_mark
     ax = fig.axes[0]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     plt.close(fig)
-    assert labels == ["ground truth", "ground truth start", "ground truth end", "estimate (initializing)",
+    assert labels == ["ground truth", "ground truth start", "ground truth end",
                       "estimate (tracking)", "estimate (ambiguous)", "estimate start (first pose)", "final estimated pose and heading"]
     segments = ax.collections[-1]
     colours = [tuple(c) for c in segments.get_colors()]

@@ -77,12 +77,14 @@ def overlay_figure(
         status = list(statuses) if statuses is not None and len(statuses) == len(est) else ["tracking"] * len(est)
         # One segment per pair of consecutive posed frames, in the colour of the later frame's status.
         segments = [est[[a, b], :2] for a, b in zip(idx[:-1], idx[1:])]
-        colours = [STATUS_COLOURS.get(status[b], "tab:green") for b in idx[1:]]
+        colour = lambda s: STATUS_COLOURS.get(s, "tab:olive")  # noqa: E731 (a status added later still gets drawn)
+        colours = [colour(status[b]) for b in idx[1:]]
         if segments:
             ax.add_collection(LineCollection(segments, colors=colours, linewidths=1.8))
-        shown = [s for s in STATUS_COLOURS if any(status[i] == s for i in idx)] if statuses is not None else []
+        present = {status[b] for b in idx[1:]} or {status[idx[0]]}  # the colours drawn
+        shown = [s for s in (*STATUS_COLOURS, *sorted(present - set(STATUS_COLOURS))) if s in present] if statuses is not None else []
         for s in shown:
-            handles.append(Line2D([], [], c=STATUS_COLOURS[s], lw=1.8, label=f"estimate ({s})"))
+            handles.append(Line2D([], [], c=colour(s), lw=1.8, label=f"estimate ({s})"))
         if not shown:
             handles.append(Line2D([], [], c="tab:green", lw=1.8, label="estimate"))
         first, last = est[idx[0]], est[idx[-1]]

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, ZflocError
-from .cli_support import CliParser, install_warning_format, prepare_out_dir, print_warning
+from .cli_support import CliParser, install_warning_format, one_line, prepare_out_dir, print_warning
 from .signals import interrupted, terminate_as_interrupt
 
 EPILOG = """examples:
@@ -345,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
                 return cmd_export(args)
             return args.func(args)
     except ZflocError as err:
-        print(f"zfloc-stream: error: {' '.join(str(err).split()) or type(err).__name__}", file=sys.stderr)
+        print(f"zfloc-stream: error: {one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as err:
         return interrupted("zfloc-stream", err)

@@ -65,6 +65,12 @@ class CliParser(argparse.ArgumentParser):
         return parsed
 
 
+def one_line(err: BaseException) -> str:
+    """An error's message on one line (a multi-line one joined), or its type's name."""
+    text = str(err)
+    return (" ".join(text.split()) if "\n" in text else text) or type(err).__name__
+
+
 _active_bar = None  # the tqdm bar on screen, so a warning is printed above it, not into it
 
 
@@ -82,13 +88,13 @@ def install_warning_format() -> None:
     without the file, line number and source line Python adds. Only the formatting is
     replaced: filters, and pytest.warns / catch_warnings(record=True), work as before."""
 
-    def one_line(message, category, filename, lineno, line=None):
+    def format_one_line(message, category, filename, lineno, line=None):
         if _active_bar is not None:  # above the bar, not into it
             print_warning(message)
             return ""
         return "warning: " + " ".join(str(message).split()) + "\n"
 
-    warnings.formatwarning = one_line
+    warnings.formatwarning = format_one_line
 
 
 class Progress:

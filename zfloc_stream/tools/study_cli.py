@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, ZflocError
-from .cli_support import CliParser, install_warning_format
+from .cli_support import CliParser, install_warning_format, one_line
 
 EPILOG = """examples:
   zfloc-study --dataset sim:all --lengths 15,20,35,50,100 --seeds 5 --out study-sim/
@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
         )
     except ZflocError as err:
-        print(f"zfloc-study: error: {' '.join(str(err).split()) or type(err).__name__}", file=sys.stderr)
+        print(f"zfloc-study: error: {one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("zfloc-study: interrupted (finished cells are kept; re-run to resume)", file=sys.stderr)
