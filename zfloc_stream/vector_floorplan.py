@@ -359,32 +359,75 @@ def _ring_circle(ring: np.ndarray, max_radius: float) -> tuple[float, float, flo
 
 def merge_collinear(segments: np.ndarray, angle_deg: float, offset: float, gap: float) -> np.ndarray:
     """Join segments lying on one line whose extents touch or overlap (up to gap apart):
-    a wall drawn in pieces is one line, as it is when extracted from pixels."""
+    a wall drawn in pieces is one line, as it is when extracted from pixels.
+
+    Greedy in index order: the first mergeable pair (i < j, lowest i, then lowest j) is
+    merged into i and j removed, until no pair is left. Done by a scan pointer p with the
+    invariant "no mergeable pair starts before p": after i grows, only pairs (k, i), k < i,
+    can be new, so they are looked for first; each look is one vectorised test against all
+    segments, so a plan of thousands of pieces takes O(n) tests, not the O(n^3) of
+    restarting the search after every merge."""
     segs = [s for s in np.asarray(segments, dtype=float).reshape(-1, 2, 2) if np.linalg.norm(s[1] - s[0]) > 1e-9]
+    if len(segs) < 2:
+        return np.array(segs).reshape(-1, 2, 2)
     cos_tol = math.cos(math.radians(angle_deg))
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(segs)):
-            a = segs[i]
-            d = (a[1] - a[0]) / np.linalg.norm(a[1] - a[0])
-            n = np.array([-d[1], d[0]])
-            for j in range(i + 1, len(segs)):
-                b = segs[j]
-                db = (b[1] - b[0]) / np.linalg.norm(b[1] - b[0])
-                if abs(d @ db) < cos_tol or np.abs((b - a[0]) @ n).max() > offset:
-                    continue
-                ta, tb = sorted(((a - a[0]) @ d).tolist()), sorted(((b - a[0]) @ d).tolist())
-                if tb[0] > ta[1] + gap or ta[0] > tb[1] + gap:
-                    continue
-                lo, hi = min(ta[0], tb[0]), max(ta[1], tb[1])
-                segs[i] = np.array([a[0] + lo * d, a[0] + hi * d])
-                del segs[j]
-                merged = True
-                break
-            if merged:
-                break
-    return np.array(segs).reshape(-1, 2, 2)
+    S = np.array(segs)  # (n, 2, 2), rows removed as segments merge
+    frames = [_line_frame(s) for s in S]
+    D = np.array([f[0] for f in frames])  # unit directions
+    N = np.array([f[1] for f in frames])  # unit normals
+    T = np.array([f[2] for f in frames])  # sorted extents along the own direction
+    alive = np.ones(len(S), dtype=bool)
+
+    def mergeable_as_first(i: int, js: np.ndarray) -> np.ndarray:
+        """Pairs (i, j) for each j in js: segment i's frame, segment j's endpoints."""
+        b = S[js]  # (m, 2, 2)
+        rel = b - S[i, 0]
+        along = np.sort(rel @ D[i], axis=1)
+        ok = np.abs(D[js] @ D[i]) >= cos_tol
+        ok &= np.abs(rel @ N[i]).max(axis=1) <= offset
+        return ok & ~((along[:, 0] > T[i, 1] + gap) | (T[i, 0] > along[:, 1] + gap))
+
+    def mergeable_as_second(js: np.ndarray, i: int) -> np.ndarray:
+        """Pairs (j, i) for each j in js: segment j's frame, segment i's endpoints."""
+        rel = S[i][None, :, :] - S[js, 0][:, None, :]  # (m, 2, 2)
+        along = np.sort(np.einsum("mek,mk->me", rel, D[js]), axis=1)
+        ok = np.abs(D[js] @ D[i]) >= cos_tol
+        ok &= np.abs(np.einsum("mek,mk->me", rel, N[js])).max(axis=1) <= offset
+        return ok & ~((along[:, 0] > T[js, 1] + gap) | (T[js, 0] > along[:, 1] + gap))
+
+    def merge(i: int, j: int) -> None:  # j into i, as the pairwise rule does
+        a, b, d = S[i], S[j], D[i]
+        ta, tb = sorted(((a - a[0]) @ d).tolist()), sorted(((b - a[0]) @ d).tolist())
+        lo, hi = min(ta[0], tb[0]), max(ta[1], tb[1])
+        S[i] = np.array([a[0] + lo * d, a[0] + hi * d])
+        D[i], N[i], T[i] = _line_frame(S[i])
+        alive[j] = False
+
+    p = 0
+    while p < len(S):
+        if not alive[p]:
+            p += 1
+            continue
+        before = np.flatnonzero(alive[:p])
+        hit = before[mergeable_as_second(before, p)] if len(before) else before
+        if len(hit):  # p grew: the first pair is now (k, p) for the lowest such k
+            k = int(hit[0])
+            merge(k, p)
+            p = k
+            continue
+        after = p + 1 + np.flatnonzero(alive[p + 1:])
+        hit = after[mergeable_as_first(p, after)] if len(after) else after
+        if len(hit):
+            merge(p, int(hit[0]))
+            continue  # p grew: look back first
+        p += 1
+    return S[alive].reshape(-1, 2, 2)
+
+
+def _line_frame(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit direction, unit normal and sorted extent [t0, t1] along the direction from s[0]."""
+    d = (s[1] - s[0]) / np.linalg.norm(s[1] - s[0])
+    return d, np.array([-d[1], d[0]]), np.array(sorted(((s - s[0]) @ d).tolist()))
 
 
 @dataclass
