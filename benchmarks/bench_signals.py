@@ -29,8 +29,10 @@ from zfloc_stream.errors import SessionLogError
 from zfloc_stream.session import read_session
 
 
-def start(out: Path, frames: int, scene: str) -> subprocess.Popen:
+def start(out: Path, frames: int, scene: str, overrides=()) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", scene, "--frames", str(frames), "--out", str(out), "--no-progress"]
+    for o in overrides:
+        cmd += ["--set", o]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -67,24 +69,25 @@ def sigterm(tmp: Path, frames: int, scene: str) -> dict:
     return {"exit": child.returncode, "stderr": err.strip(), "csv_rows": done, "frames_read": logged, "footer": footer}
 
 
-def sigkills(tmp: Path, frames: int, scene: str, kills: int, seed: int) -> list[dict]:
+def sigkills(tmp: Path, frames: int, scene: str, kills: int, seed: int, overrides=()) -> list[dict]:
     rng = np.random.default_rng(seed)
     results = []
     for k in range(kills):
         out = tmp / f"kill{k}"
-        child = start(out, frames, scene)
+        child = start(out, frames, scene, overrides)
         wait_rows(child, out, 1)
-        target = int(rng.integers(1, frames - 1))
+        target = int(rng.integers(1, frames * 3 // 4))  # a kill mid-run, not after the end
         try:
             wait_rows(child, out, target)
         except RuntimeError:
             pass
         time.sleep(float(rng.uniform(0, 0.3)))  # anywhere inside a frame
+        finished_first = child.poll() is not None
         os.kill(child.pid, signal.SIGKILL)
         child.wait()
         done = rows(out)
         salvaged = frames_in(out / "session.mcap", salvage=True)
-        results.append({"kill": k, "csv_rows": done, "salvaged": salvaged, "lost": max(done - salvaged, 0)})
+        results.append({"kill": k, "csv_rows": done, "salvaged": salvaged, "lost": max(done - salvaged, 0), "ended_before": finished_first})
     return results
 
 
@@ -94,14 +97,16 @@ def main(argv=None) -> int:
     p.add_argument("--scene", default="rooms")
     p.add_argument("--kills", type=int, default=10)
     p.add_argument("--seed", type=int, default=29)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings for the killed runs (e.g. logging.chunk_max_frames=10)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="zfloc-signals-") as tmp:
         term = sigterm(Path(tmp), args.frames, args.scene)
         print(f"SIGTERM: exit {term['exit']}, footer written: {term['footer']}, {term['frames_read']} frames read "
               f"(trajectory.csv: {term['csv_rows']} rows); stderr: {term['stderr']!r}")
-        results = sigkills(Path(tmp), args.frames, args.scene, args.kills, args.seed)
+        results = sigkills(Path(tmp), args.frames, args.scene, args.kills, args.seed, args.set)
         for r in results:
-            print(f"SIGKILL {r['kill']}: {r['csv_rows']} frames finished, {r['salvaged']} read back with salvage, lost {r['lost']}")
+            late = " (the run had ended before the kill)" if r["ended_before"] else ""
+            print(f"SIGKILL {r['kill']}: {r['csv_rows']} frames finished, {r['salvaged']} read back with salvage, lost {r['lost']}{late}")
         print(f"SIGKILL x{len(results)}: frames lost per kill {[r['lost'] for r in results]}, max {max(r['lost'] for r in results)}")
     return 0
 

@@ -15,7 +15,7 @@ from fuzz_inputs import BOX, fuzz_floorplan, issue_floorplans, write_dxf
 
 from zfloc_stream.errors import ZflocError
 from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan
+from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan, merge_collinear
 
 N_FUZZ = 150
 
@@ -88,3 +88,64 @@ def test_fuzzed_floorplans_load_or_fail_in_one_line(tmp_path):
     outcomes = fuzz_floorplans(seed=29, n=N_FUZZ, d=tmp_path)
     # both outcomes occur, or the fuzz is not reaching the loaders' checks
     assert outcomes["loaded"] > 10 and outcomes["refused"] > 40, outcomes
+
+
+def _pairwise_merge(segments, angle_deg, offset, gap):
+    """The rule merge_collinear implements, spelled as its definition: merge the first
+    mergeable pair (i < j) into i, drop j, start over (cubic: small inputs only)."""
+    import math
+
+    segs = [s for s in np.asarray(segments, dtype=float).reshape(-1, 2, 2) if np.linalg.norm(s[1] - s[0]) > 1e-9]
+    cos_tol = math.cos(math.radians(angle_deg))
+
+    def first_pair():
+        for i, a in enumerate(segs):
+            d = (a[1] - a[0]) / np.linalg.norm(a[1] - a[0])
+            n = np.array([-d[1], d[0]])
+            for j in range(i + 1, len(segs)):
+                b = segs[j]
+                db = (b[1] - b[0]) / np.linalg.norm(b[1] - b[0])
+                ta, tb = sorted(((a - a[0]) @ d).tolist()), sorted(((b - a[0]) @ d).tolist())
+                if abs(d @ db) >= cos_tol and np.abs((b - a[0]) @ n).max() <= offset and not (tb[0] > ta[1] + gap or ta[0] > tb[1] + gap):
+                    return i, j, d, ta, tb
+        return None
+
+    while (pair := first_pair()) is not None:
+        i, j, d, ta, tb = pair
+        a = segs[i]
+        segs[i] = np.array([a[0] + min(ta[0], tb[0]) * d, a[0] + max(ta[1], tb[1]) * d])
+        del segs[j]
+    return np.array(segs).reshape(-1, 2, 2)
+
+
+def test_merge_collinear_equals_the_pairwise_rule():
+    """merge_collinear was the pairwise rule run literally: a DXF of 500 wall pieces took
+    minutes (a hang). The scan-pointer version gives the same segments."""
+    import math
+
+    rng = np.random.default_rng(290)
+    for _ in range(60):
+        segs = []
+        for _ in range(int(rng.integers(2, 50))):
+            if rng.random() < 0.6:  # pieces of a few walls, slightly off
+                y, x, ang = int(rng.integers(0, 4)) + rng.normal(0, 0.01), rng.uniform(0, 10), rng.normal(0, 0.03)
+                length = rng.uniform(0.1, 2)
+                segs.append([[x, y], [x + length * math.cos(ang), y + length * math.sin(ang)]])
+            else:
+                segs.append(rng.uniform(0, 10, size=(2, 2)).tolist())
+        got, want = merge_collinear(np.array(segs), 5.0, 0.05, 0.3), _pairwise_merge(np.array(segs), 5.0, 0.05, 0.3)
+        assert got.shape == want.shape and np.allclose(got, want, rtol=0, atol=1e-12), (got, want)
+
+
+def test_plan_of_thousands_of_wall_pieces_loads(tmp_path):
+    rng = np.random.default_rng(7)
+    pieces = []
+    for _ in range(3000):  # a 60 x 40 m floor of 1 m wall pieces on a 2 m grid
+        if rng.random() < 0.5:
+            x, y = float(rng.integers(0, 60)), float(2 * rng.integers(0, 21))
+            pieces.append(((x, y), (x + 1.0, y)))
+        else:
+            x, y = float(2 * rng.integers(0, 31)), float(rng.integers(0, 40))
+            pieces.append(((x, y), (x, y + 1.0)))
+    plan = load_vector_floorplan(write_dxf(tmp_path / "pieces.dxf", pieces, 6))
+    assert 0 < len(plan.lines.endpoints) < len(pieces) // 3  # pieces on one wall line joined

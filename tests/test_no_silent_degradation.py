@@ -178,3 +178,21 @@ def test_run_and_export_read_a_cut_off_session_with_salvage(tmp_path, capsys):
     capsys.readouterr()
     assert main(["run", "--input", str(cut), "--out", str(tmp_path / "o"), "--no-progress", "--salvage"]) == 0
     assert 1 < len((tmp_path / "o" / "trajectory.csv").read_text().splitlines()) <= 12
+
+
+def test_drop_counter_warns_once_per_cause_and_sums_up():
+    from zfloc_stream.drops import DropCounter
+
+    drops = DropCounter("bag.mcap")
+    with pytest.warns(UserWarning) as caught:
+        for t in range(5):
+            drops.note("depth contains inf", f"t={t}")
+        drops.note_problem("t=7.000000000: frame dropped: no /odometry pose (gap)")
+        drops.note_problem("repeated timestamps (first at t=1.0): frames kept in file order")  # loses nothing: no warning
+        drops.summary()
+    messages = [str(w.message) for w in caught]
+    assert messages == [
+        "bag.mcap: frame dropped: depth contains inf (first at t=0; further ones are counted)",
+        "bag.mcap: frame dropped: no /odometry pose (gap) (first at t=7.000000000; further ones are counted)",
+        "bag.mcap: 6 frame(s) dropped: depth contains inf (5); no /odometry pose (gap) (1)",
+    ]

@@ -45,29 +45,37 @@ MAX_COORDINATE = 1e8
 _PIL_LOCK = threading.Lock()
 
 
+@contextlib.contextmanager
+def _pillow():
+    """Pillow's Image with its decompression-bomb guard off (our own budget applies,
+    floorplan.max_cells), for one caller at a time (the guard is a module global)."""
+    from PIL import Image
+
+    with _PIL_LOCK:
+        guard, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            yield Image
+        finally:
+            Image.MAX_IMAGE_PIXELS = guard
+
+
 def _image_size(path: Path) -> tuple[int, int] | None:
     """(width, height) from the image file's header without decoding it (None when
     Pillow does not know the format; cv2 then reads it whole)."""
-    from PIL import Image, UnidentifiedImageError
-
-    with _PIL_LOCK:
-        guard, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None  # our own budget applies, not Pillow's
+    with _pillow() as Image:
         try:
             with Image.open(path) as im:
                 return im.size
-        except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError):
+        except Exception:  # noqa: BLE001 - unknown format or damaged header: cv2 decides
             return None
-        finally:
-            Image.MAX_IMAGE_PIXELS = guard
 
 
 def _decodes(path: Path) -> str | None:
     """Why Pillow cannot decode the image (None when it can, or does not know the format):
     checked before cv2 reads it, since libpng prints its own errors on stderr."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
-    with _PIL_LOCK:
-        guard, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+    with _pillow() as Image:
         try:
             with Image.open(path) as im:
                 im.load()
@@ -75,8 +83,6 @@ def _decodes(path: Path) -> str | None:
             return None
         except Exception as err:  # noqa: BLE001 - any decoder fault on damaged bytes
             return f"{type(err).__name__}: {err}"
-        finally:
-            Image.MAX_IMAGE_PIXELS = guard
     return None
 
 

@@ -646,8 +646,8 @@ def load_vector_floorplan(path, settings: Settings | None = None, scale: float |
     options = {k: v for k, v in (("scale", scale), ("layers", list(layers or [])), ("skip_layers", list(skip_layers or []))) if v}
     try:
         return VectorFloorplan(geometry, settings, path.stem, source=(path.name, path.read_bytes()), options=options)
-    except FloorplanError as err:
-        raise FloorplanError(f"{path}: {err}") from None
+    except FloorplanError as err:  # messages name the plan by its stem: name the file instead
+        raise FloorplanError(f"{path}: {str(err).removeprefix(path.stem + ': ')}") from None
 
 
 def load_vector_yaml(path: Path, meta: dict, settings: Settings | None) -> VectorFloorplan:

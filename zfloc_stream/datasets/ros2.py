@@ -30,6 +30,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from ..config import Settings
+from ..drops import DropCounter
 from ..errors import FrameError, InputError, SessionLogError
 from ..frames import CameraFrame, LaserFrame
 from ..pose_interpolation import PoseTrack
@@ -269,18 +270,20 @@ class Ros2Bag:
         wanted = {pos: k for k, (pos, _) in enumerate(self.usable[start:stop], start=start)}
         pending: dict[int, object] = {}
         next_k, pos = start, -1
+        drops = DropCounter(str(self.path))  # unusable frames: one warning per cause, counted
         for role, msg in self._decoded((self.kind,)):
             pos += 1
             if pos not in wanted:
                 continue
             pending[wanted[pos]] = msg
             while next_k in pending:  # yield in stamp order, buffering only out-of-order ones
-                frame = self._frame(pending.pop(next_k), self.usable[next_k][1])
+                frame = self._frame(pending.pop(next_k), self.usable[next_k][1], drops)
                 next_k += 1
                 if frame is not None:
                     yield frame
+        drops.summary()
 
-    def _frame(self, msg, stamp: int):
+    def _frame(self, msg, stamp: int, drops: DropCounter):
         T_odom_base, _ = self.track.at(stamp)
         T = T_odom_base @ self.T_base_sensor
         t = stamp / 1e9
@@ -300,9 +303,8 @@ class Ros2Bag:
                 raise FrameError(f"CameraInfo is for {width}x{height} images but depth is {depth.shape[1]}x{depth.shape[0]}")
             return CameraFrame(depth, None, K, T, t)
         except (SessionLogError, FrameError) as err:  # one unusable frame: skip it, say why
-            reason = f"{self.topics[self.kind]} frame at t={t:.6f} skipped: {err}"
-            self.skipped.append(reason)
-            warnings.warn(f"{self.path}: {reason}", stacklevel=2)
+            self.skipped.append(f"{self.topics[self.kind]} frame at t={t:.6f} skipped: {err}")
+            drops.note(f"{self.topics[self.kind]}: {err}", f"t={t:.6f}")
             return None
 
 
