@@ -32,8 +32,8 @@ from mcap_ros2.decoder import DecoderFactory
 from ..config import Settings
 from ..errors import FrameError, InputError, SessionLogError
 from ..frames import CameraFrame, LaserFrame
+from ..messages import depth_from_msg, matrix_from_quaternion
 from ..pose_interpolation import PoseTrack
-from ..session.schemas import depth_from_msg, matrix_from_quaternion
 from .base import Sequence, register
 
 # role -> accepted schema names (rosbag2 writes "pkg/msg/Type"; older tools "pkg/Type")
