@@ -4,6 +4,7 @@ correlative seeding finds what the minimal samples miss on a map built from scan
 
 import csv
 import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -101,11 +102,12 @@ INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" /
 
 
 @pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")
-def test_real_building_benchmark_ci_subset():
+def test_real_building_benchmark_ci_subset(monkeypatch):
     """One held-out Intel window through benchmarks/eval_real.py, online and reference
     (the full table: python benchmarks/eval_real.py)."""
     spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
     eval_real = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, eval_real)  # its dataclasses resolve their annotations through it
     spec.loader.exec_module(eval_real)
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
     assert row["success"] and row["ref_success"], row
