@@ -28,6 +28,7 @@ import numpy as np
 from zfloc_stream.config import load_settings
 from zfloc_stream.estimation.ransac import floorplan_matches
 from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.rng import make_rng
 
 WIDTH, HEIGHT = 248.0, 240.0  # m
@@ -94,8 +95,8 @@ def main(argv=None) -> int:
         dxf = write_dxf(segments, pillars, out / "building.dxf")
         settings = load_settings(overrides=args.set)
         if settings.estimator.kernels == "numba":  # compile outside the timings
-            Floorplan.load(write_dxf(segments[:40], pillars[:2], out / "warm.dxf"), settings=settings)
-        plan, t_dxf = timed(lambda: Floorplan.load(dxf, settings=settings))
+            load_floorplan(write_dxf(segments[:40], pillars[:2], out / "warm.dxf"), settings=settings)
+        plan, t_dxf = timed(lambda: load_floorplan(dxf, settings=settings))
         _, t_dxf_tables = timed(lambda: floorplan_matches(plan, settings.estimator.solvers))
         _, t_dxf_cached = timed(lambda: floorplan_matches(plan, settings.estimator.solvers))
         raster_yaml = Floorplan.write_ros(plan, out, "raster")  # the base method: a plain ROS map, no vector key
@@ -106,7 +107,7 @@ def main(argv=None) -> int:
               f"{len(plan.lines)} lines, {len(plan.circles)} circles")
         print(f"raster: {w} x {h} cells at {raster.resolution} m -> {len(raster.lines)} lines, {len(raster.circles)} circles")
         print("| load | seconds | goal |\n|---|---|---|")
-        print(f"| DXF plan (Floorplan.load) | {t_dxf:.2f} | <= 5 |")
+        print(f"| DXF plan (load_floorplan) | {t_dxf:.2f} | <= 5 |")
         print(f"| raster plan (Floorplan.load) | {t_raster:.2f} | <= 3 |")
         print(f"| RANSAC tables, DXF plan (first use / cached) | {t_dxf_tables:.2f} / {t_dxf_cached:.4f} | |")
         print(f"| RANSAC tables, raster plan (first use) | {t_raster_tables:.2f} | |")

@@ -35,6 +35,7 @@ from fuzz_inputs import fuzz_floorplan, hostile_setting  # noqa: E402
 from zfloc_stream.config import Settings, load_settings  # noqa: E402
 from zfloc_stream.errors import ZflocError  # noqa: E402
 from zfloc_stream.floorplan import Floorplan  # noqa: E402
+from zfloc_stream.plan_loading import load_floorplan  # noqa: E402
 from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan  # noqa: E402
 
 
@@ -96,7 +97,7 @@ def fuzz_plans(n: int, seed: int, timeout: float, d: Path) -> tuple[Counter, lis
         def load(path=path, kwargs=kwargs):
             if path.suffix in VECTOR_SUFFIXES:
                 return load_vector_floorplan(path, **kwargs)
-            return Floorplan.load(path, **kwargs)
+            return load_floorplan(path, **kwargs)
 
         guarded(load, timeout, tally, failures, f"plan {case} ({path.name}, {kwargs})")
         for f in d.glob(f"case{case}.*"):

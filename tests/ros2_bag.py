@@ -11,7 +11,7 @@ import numpy as np
 from mcap_ros2.writer import Writer
 
 from zfloc_stream.pose_interpolation import interpolate_pose
-from zfloc_stream.session.schemas import quaternion_from_matrix
+from zfloc_stream.messages import quaternion_from_matrix
 
 # the pieces the package's own ROS 2 output uses (zfloc_stream/ros2_output.py)
 from zfloc_stream.ros2_output import HEADER, POINT, POSE, QUATERNION, TIME, VECTOR3

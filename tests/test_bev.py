@@ -64,8 +64,7 @@ def test_laser_hits_land_on_walls_and_interior_is_free():
     assert np.allclose(obs.trajectory[-1], [8, 4, 1.2])
 
 
-def test_laser_lines_are_extracted_when_primitives_exist():
-    pytest.importorskip("zfloc_stream.primitives")
+def test_laser_lines_are_extracted():
     bev = RollingBEV(Settings())
     for i, (x, y) in enumerate([(2, 2), (5, 3), (8, 4)]):
         bev.add(laser(x, y, 0.0, t=i))

@@ -152,11 +152,11 @@ def test_narrow_openings_say_the_clear_width_and_the_scale_hint_works(tmp_path, 
 
 
 def test_carmen_self_test_warning_recipe_runs(tmp_path, capsys):
-    from test_real_buildings import _laser_run, _write_carmen
+    from laser_helpers import laser_run, write_carmen
 
-    scene, seq = _laser_run("rooms", 24)
+    scene, seq = laser_run("rooms", 24)
     log = tmp_path / "robot.log"
-    _write_carmen(log, seq, stamp_digits=12)
+    write_carmen(log, seq, stamp_digits=12)
     rc, out, err = call(capsys, cli.main, "run", "--input", log, "--out", tmp_path / "self", "--no-progress")
     assert rc == 0, err
     warning = [line for line in err.splitlines() if line.startswith("warning: ")]

@@ -14,9 +14,29 @@ def test_default_yaml_names_every_setting_with_its_default():
     assert on_disk == Settings().model_dump()
 
 
-def test_every_config_file_loads():
-    for path in sorted((ROOT / "configs").glob("*.yaml")):
-        load_settings(path)
+def _leaves(tree, prefix=()):
+    """{("estimator", "solvers", "pool"): value} for every setting a nested dict names."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_leaves(value, prefix + (key,)))
+        else:
+            out[prefix + (key,)] = value
+    return out
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "configs").glob("*.yaml")), ids=lambda p: p.name)
+def test_every_config_file_loads_as_it_says(path):
+    """Each shipped file loads, every setting it names has the file's value, every other
+    setting keeps its default, and a file other than default.yaml changes something."""
+    written = _leaves(yaml.safe_load(path.read_text()) or {})
+    loaded, defaults = _leaves(load_settings(path).model_dump()), _leaves(Settings().model_dump())
+    assert written, f"{path.name} names no setting"
+    for key, value in written.items():
+        assert loaded[key] == value, (path.name, ".".join(key))
+    assert {k: v for k, v in loaded.items() if k not in written} == {k: v for k, v in defaults.items() if k not in written}
+    if path.name != "default.yaml":
+        assert any(defaults[k] != v for k, v in written.items()), f"{path.name} only repeats defaults"
 
 
 def test_dotted_overrides_are_parsed_as_yaml():

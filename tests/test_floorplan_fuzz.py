@@ -14,7 +14,7 @@ import pytest
 from fuzz_inputs import BOX, fuzz_floorplan, issue_floorplans, write_dxf
 
 from zfloc_stream.errors import ZflocError
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan, merge_collinear
 
 N_FUZZ = 150
@@ -65,7 +65,7 @@ def test_unknown_dxf_unit_is_refused_naming_it(tmp_path):
 def load_any(path, kwargs):
     if path.suffix in VECTOR_SUFFIXES:
         return load_vector_floorplan(path, **kwargs)
-    return Floorplan.load(path, **kwargs)
+    return load_floorplan(path, **kwargs)
 
 
 def fuzz_floorplans(seed: int, n: int, d) -> dict[str, int]:

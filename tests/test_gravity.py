@@ -160,14 +160,12 @@ def sim_gravity_errors(scene, seeds, n_frames, labels):
 
 @pytest.mark.parametrize("labels", [True, False])
 def test_gravity_on_simulated_sequences(labels):
-    pytest.importorskip("zfloc_stream.sim.simulator")
     err = sim_gravity_errors("rooms", range(2), 8, labels)
     assert np.median(err) < 1.0
 
 
 @pytest.mark.slow
 def test_gravity_on_simulated_sequences_all_scenes():
-    pytest.importorskip("zfloc_stream.sim.simulator")
     for scene in ("rooms", "apartment", "office", "hall"):
         for labels in (True, False):
             err = sim_gravity_errors(scene, range(5), 12, labels)

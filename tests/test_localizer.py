@@ -14,6 +14,7 @@ from zfloc_stream.rng import make_rng
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 from zfloc_stream.sim.trajectory import trajectory_through
+from zfloc_stream.sim2 import wrap_angle
 
 
 def _run(scene, frames, settings=None):
@@ -26,13 +27,22 @@ def test_same_inputs_and_seed_give_identical_estimates():
     seq = simulate(scene, SimSettings(), seed=1, n_frames=25)
     _, a = _run(scene, seq)
     _, b = _run(scene, seq)
+    assert len(a) == len(b) == 25
+    assert sum(len(e.alternatives) for e in a) > 0  # the comparison below covers real modes
     for ea, eb in zip(a, b):
         assert ea.status == eb.status
         assert (ea.pose is None) == (eb.pose is None)
         if ea.pose is not None:
             assert np.array_equal(ea.pose, eb.pose)
             assert np.array_equal(ea.covariance, eb.covariance)
+            assert np.array_equal(ea.alignment.params(), eb.alignment.params())
+        assert np.array_equal(ea.score, eb.score, equal_nan=True)
+        # every alternative, in order: the same alignment, pose, weight and score, bit for bit
         assert len(ea.alternatives) == len(eb.alternatives)
+        for xa, xb in zip(ea.alternatives, eb.alternatives):
+            assert np.array_equal(xa.alignment.params(), xb.alignment.params())
+            assert np.array_equal(xa.pose, xb.pose)
+            assert (xa.weight, xa.score) == (xb.weight, xb.score)
 
 
 def test_every_frame_gets_a_pose_once_initialized():
@@ -165,6 +175,11 @@ def test_symmetric_over_seeds():
         seq = simulate(scene, SimSettings(), seed=seed, trajectory=path)
         _, est = _run(scene, seq)
         assert est[-1].status == "tracking"
+        # tracking the mirror image would also say "tracking": the reported pose must be the
+        # true one (the mirror's pose is metres away, its heading off by a half turn)
+        true = seq.poses[-1]
+        assert np.linalg.norm(est[-1].pose[:2] - true[:2]) < 0.5, (seed, est[-1].pose, true)
+        assert abs(wrap_angle(est[-1].pose[2] - true[2])) < np.radians(10), (seed, est[-1].pose, true)
 
 
 def test_a_floorplan_and_its_caches_are_freed_after_use():

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from test_scoring import RES, building, observe  # synthetic floorplan + BEV helpers
+from plan_helpers import RES, building, observe  # synthetic floorplan + BEV helpers
 
 from zfloc_stream.config import Settings
 from zfloc_stream.errors import InputError

@@ -4,6 +4,7 @@ correlative seeding finds what the minimal samples miss on a map built from scan
 
 import csv
 import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,29 +14,10 @@ from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.localizer import Localizer
-from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
 from zfloc_stream.tools.cli import main as cli_main
+from laser_helpers import laser_run, write_carmen
 
-LASER = LaserSimSettings(fov_deg=180.0, n_beams=180, max_range=10.0)
 FIXED = {"estimator": {"scale_mode": "fixed"}}
-
-
-def _laser_run(scene_name: str, n_frames: int, seed: int = 0):
-    scene = build_scene(scene_name, seed=seed)
-    return scene, simulate_laser(scene, LASER, seed=seed, n_frames=n_frames)
-
-
-def _write_carmen(path, seq, stamp_digits: int) -> None:
-    """FLASER lines (180 beams over 180 deg from -90, the Carmen default) whose timestamps
-    are printed with few digits, so neighbouring scans share a stamp, as in real logs."""
-    lines = []
-    for k, frame in enumerate(seq.frames):
-        x, y, theta = frame.ground_truth
-        ranges = np.where(frame.valid, frame.ranges, 81.83)
-        stamp = f"{1e6 + 0.2 * k:.{stamp_digits}g}"
-        lines.append(" ".join(["FLASER", str(len(ranges)), *(f"{r:.3f}" for r in ranges),
-                               f"{x:.4f}", f"{y:.4f}", f"{theta:.5f}", "0", "0", "0", stamp, "host", stamp]))
-    path.write_text("\n".join(lines) + "\n")
 
 
 def _trajectory_rows(path):
@@ -44,9 +26,9 @@ def _trajectory_rows(path):
 
 
 def test_carmen_log_with_repeated_timestamps_runs_and_every_frame_after_round_one_has_a_pose(tmp_path):
-    scene, seq = _laser_run("rooms", 24)
+    scene, seq = laser_run("rooms", 24)
     log = tmp_path / "messy.log"
-    _write_carmen(log, seq, stamp_digits=7)  # 1000000.2, 1000000.4 -> '1000000' repeats
+    write_carmen(log, seq, stamp_digits=7)  # 1000000.2, 1000000.4 -> '1000000' repeats
     stamps = [line.split()[-1] for line in log.read_text().splitlines()]
     assert len(set(stamps)) < len(stamps)  # the log really repeats timestamps
     plan = scene.write_ros(tmp_path / "plan")
@@ -71,7 +53,7 @@ def _erase_walls_near(floorplan: Floorplan, points: np.ndarray, radius: float) -
 
 
 def test_a_track_through_an_unmapped_part_for_ten_frames_is_not_lost():
-    scene, seq = _laser_run("office", 45, seed=1)
+    scene, seq = laser_run("office", 45, seed=1)
     unmapped = slice(25, 37)  # 12 frames whose surroundings the plan lacks
     plan = _erase_walls_near(scene.floorplan, seq.poses[unmapped, :2], radius=2.5)
     settings = load_settings(base_overrides=FIXED)
@@ -93,7 +75,7 @@ def test_a_track_through_an_unmapped_part_for_ten_frames_is_not_lost():
 
 
 def test_correlative_seeds_find_a_rigid_alignment_and_the_reference_refines_it():
-    scene, seq = _laser_run("office", 12, seed=2)
+    scene, seq = laser_run("office", 12, seed=2)
     points = np.concatenate([
         np.column_stack([f.ranges[f.valid] * np.cos(f.angles[f.valid]), f.ranges[f.valid] * np.sin(f.angles[f.valid])])
         @ f.T_odom_sensor[:2, :2].T + f.T_odom_sensor[:2, 3]
@@ -120,11 +102,12 @@ INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" /
 
 
 @pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")
-def test_real_building_benchmark_ci_subset():
+def test_real_building_benchmark_ci_subset(monkeypatch):
     """One held-out Intel window through benchmarks/eval_real.py, online and reference
     (the full table: python benchmarks/eval_real.py)."""
     spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
     eval_real = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, eval_real)  # its dataclasses resolve their annotations through it
     spec.loader.exec_module(eval_real)
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
     assert row["success"] and row["ref_success"], row

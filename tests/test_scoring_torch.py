@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from test_scoring import building, observe  # synthetic floorplan + BEV helpers
+from plan_helpers import building, observe  # synthetic floorplan + BEV helpers
 
 from zfloc_stream.config import ScoringSettings, load_settings
 from zfloc_stream.errors import BackboneError

@@ -13,7 +13,7 @@ from shapely import affinity
 
 from zfloc_stream import Localizer, load_settings
 from zfloc_stream.errors import FloorplanError
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.metrics import is_success, position_errors
 from zfloc_stream.session import read_session, record_session
 from zfloc_stream.sim import build_scene, simulate_laser
@@ -120,7 +120,7 @@ def apartment():
 
 
 def test_dxf_walls_and_pillars_match_the_raster_plan(tmp_path, hall):
-    plan = Floorplan.load(write_dxf(hall, tmp_path / "hall.dxf", units=4, factor=0.001), settings=None)  # millimetres
+    plan = load_floorplan(write_dxf(hall, tmp_path / "hall.dxf", units=4, factor=0.001), settings=None)  # millimetres
     assert isinstance(plan, VectorFloorplan) and len(plan.circles) == 8
     only_walls = load_vector_floorplan(tmp_path / "hall.dxf", layers=["WALLS", "COLUMNS"])
     assert_matches_raster(only_walls, hall.floorplan)
@@ -129,7 +129,7 @@ def test_dxf_walls_and_pillars_match_the_raster_plan(tmp_path, hall):
 
 
 def test_geojson_and_svg_match_the_raster_plan(tmp_path, hall):
-    geo = Floorplan.load(write_geojson(hall, tmp_path / "hall.geojson"))
+    geo = load_floorplan(write_geojson(hall, tmp_path / "hall.geojson"))
     assert_matches_raster(geo, hall.floorplan)
     svg = load_vector_floorplan(write_svg(hall, tmp_path / "hall.svg", cm_per_unit=2.0), scale=0.02)
     assert_matches_raster(svg, hall.floorplan)
@@ -191,25 +191,25 @@ def test_bad_vector_plans_are_one_line_errors_naming_the_file(tmp_path, capsys):
     bad = tmp_path / "broken.dxf"
     bad.write_text("0\nSECTION\n2\nNOPE\n")
     with pytest.raises(FloorplanError, match="broken.dxf"):
-        Floorplan.load(bad)
+        load_floorplan(bad)
     svg = tmp_path / "plan.svg"
     svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><line x1="0" y1="0" x2="100" y2="0"/></svg>')
     with pytest.raises(FloorplanError, match=r"plan.svg: an SVG floorplan has no real-world unit: pass --scale"):
-        Floorplan.load(svg)
+        load_floorplan(svg)
     lonlat = tmp_path / "campus.geojson"
     lonlat.write_text(json.dumps({"type": "LineString", "coordinates": [[11.5761, 48.1372], [11.5763, 48.1373]]}))
     with pytest.raises(FloorplanError, match="campus.geojson: coordinates look like longitude/latitude"):
-        Floorplan.load(lonlat)
+        load_floorplan(lonlat)
     empty = tmp_path / "empty.geojson"
     empty.write_text(json.dumps({"type": "FeatureCollection", "features": []}))
     with pytest.raises(FloorplanError, match="empty.geojson: no walls found"):
-        Floorplan.load(empty)
+        load_floorplan(empty)
     doc = ezdxf.new(units=0)
     doc.modelspace().add_line((0, 0), (4, 0))
     doc.modelspace().add_line((0, 0), (0, 4))
     doc.saveas(tmp_path / "nounits.dxf")
     with pytest.warns(UserWarning, match=r"nounits.dxf: the DXF header gives no units"):
-        Floorplan.load(tmp_path / "nounits.dxf")
+        load_floorplan(tmp_path / "nounits.dxf")
     with pytest.raises(FloorplanError, match=r"nounits.dxf: no layer\(s\) walls"):
         load_vector_floorplan(tmp_path / "nounits.dxf", layers=["walls"])
     with warnings.catch_warnings():

@@ -169,7 +169,6 @@ def sim_ghosts(scene, seed, n_frames):
 
 
 def test_wall_mask_on_a_simulated_scene():
-    pytest.importorskip("zfloc_stream.sim.simulator")
     on, off = sim_ghosts("rooms", 0, 30)
     assert off[0] > 50
     assert on[0] <= 0.2 * off[0] and on[1] >= 0.6 * off[1]
@@ -178,6 +177,5 @@ def test_wall_mask_on_a_simulated_scene():
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", ["rooms", "office", "hall"])
 def test_wall_mask_on_simulated_scenes(scene):
-    pytest.importorskip("zfloc_stream.sim.simulator")
     on, off = np.sum([sim_ghosts(scene, seed, 40) for seed in range(3)], axis=0)
     assert on[0] <= 0.2 * off[0] and on[1] >= 0.6 * off[1]

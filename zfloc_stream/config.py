@@ -627,17 +627,19 @@ class Settings(Section):
     backbones: BackboneSettings = BackboneSettings()
 
 
-def _merge(base: dict, update: dict) -> dict:
+def merge_nested(base: dict, update: dict) -> dict:
+    """base updated by update, key by key at every depth (neither is changed)."""
     out = dict(base)
     for key, value in update.items():
         if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
+            out[key] = merge_nested(out[key], value)
         else:
             out[key] = value
     return out
 
 
-def _dotted_to_nested(key: str, value) -> dict:
+def dotted_to_nested(key: str, value) -> dict:
+    """"a.b.c", v -> {"a": {"b": {"c": v}}} (a --set override as a settings tree)."""
     out: dict = value
     for part in reversed(key.split(".")):
         out = {part: out}
@@ -736,7 +738,7 @@ def load_settings(
     data: dict = Settings().model_dump()
     source = "defaults"
     if base_overrides:
-        data = _merge(data, base_overrides)
+        data = merge_nested(data, base_overrides)
     if path is not None:
         path = Path(path)
         source = str(path)
@@ -750,9 +752,9 @@ def load_settings(
             raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: top level must be a mapping")
-        data = _merge(data, loaded)
+        data = merge_nested(data, loaded)
     if isinstance(overrides, dict):
-        data = _merge(data, overrides)
+        data = merge_nested(data, overrides)
     elif overrides:
         for item in overrides:
             if "=" not in item:
@@ -764,7 +766,7 @@ def load_settings(
                 raise ConfigError(f"override '{key.strip()}': value {err} (no setting needs more than a few)") from None
             except yaml.YAMLError:
                 raise ConfigError(f"override '{item}': value is not valid YAML") from None
-            data = _merge(data, _dotted_to_nested(key.strip(), value))
+            data = merge_nested(data, dotted_to_nested(key.strip(), value))
         source = f"{source} + overrides"
     return settings_from_dict(data, source)
 

@@ -244,6 +244,22 @@ def _named(path: Path, cls, *args):
         raise FloorplanError(f"{path}: {err}") from None
 
 
+MAP_YAML_SUFFIXES = (".yaml", ".yml")
+
+
+def read_map_yaml(path: Path):
+    """The parsed map YAML (a ROS map, or a vector plan's `vector:` YAML), or a one-line
+    FloorplanError."""
+    if not path.is_file():
+        raise FloorplanError(f"floorplan YAML not found: {path}")
+    try:
+        return load_yaml(path.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
+    except TooDeep as err:
+        raise FloorplanError(f"{path}: {err} (a map YAML is a flat mapping)") from None
+
+
 class Floorplan:
     """Walls of one building in metres; build with from_occupancy / load / from_gibson_map."""
 
@@ -304,14 +320,12 @@ class Floorplan:
         if gibson:
             return cls.from_gibson_map(path, settings)
         suffix = path.suffix.lower()
-        if suffix in (".dxf", ".svg", ".geojson", ".json"):  # vector drawings (vector_floorplan.py)
-            from .vector_floorplan import load_vector_floorplan
-
-            return load_vector_floorplan(path, settings)
-        if suffix in (".yaml", ".yml"):
+        if suffix in (".dxf", ".svg", ".geojson", ".json"):  # vector_floorplan.py reads these, above this module
+            raise FloorplanError(f"{path}: a vector drawing; load it with zfloc_stream.plan_loading.load_floorplan (every plan format)")
+        if suffix in MAP_YAML_SUFFIXES:
             if resolution is not None or origin is not None:
                 raise FloorplanError(f"{path}: resolution and origin come from the YAML file; do not pass them")
-            return cls._load_ros(path, settings)
+            return cls.from_map_yaml(path, settings)
         if suffix in IMAGE_SUFFIXES:
             missing = [k for k, v in (("resolution", resolution), ("origin", origin)) if v is None]
             if missing:
@@ -330,19 +344,13 @@ class Floorplan:
         raise FloorplanError(f"{path}: unknown floorplan format '{path.suffix}' (expected a ROS map .yaml/.yml, an image ({', '.join(IMAGE_SUFFIXES)}) with --resolution and --origin, or a DXF/SVG/GeoJSON drawing (.dxf, .svg, .geojson/.json))")
 
     @classmethod
-    def _load_ros(cls, path: Path, settings: Settings | None) -> Floorplan:
-        if not path.is_file():
-            raise FloorplanError(f"floorplan YAML not found: {path}")
-        try:
-            meta = load_yaml(path.read_text())
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-            raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
-        except TooDeep as err:
-            raise FloorplanError(f"{path}: {err} (a map YAML is a flat mapping)") from None
+    def from_map_yaml(cls, path, settings: Settings | None = None, meta=None) -> Floorplan:
+        """A ROS map_server YAML and its image; meta: the YAML already read (read_map_yaml)."""
+        path = Path(path)
+        if meta is None:
+            meta = read_map_yaml(path)
         if isinstance(meta, dict) and "vector" in meta:  # a vector plan (as written into sessions)
-            from .vector_floorplan import load_vector_yaml
-
-            return load_vector_yaml(path, meta, settings)
+            raise FloorplanError(f"{path}: the YAML of a vector plan; load it with zfloc_stream.plan_loading.load_floorplan (every plan format)")
         if not isinstance(meta, dict):
             raise FloorplanError(f"{path}: a ROS map YAML must be a mapping with keys {', '.join(ROS_KEYS)}")
         missing = [k for k in ROS_KEYS if k not in meta]

@@ -21,18 +21,20 @@ import hashlib
 import json
 import logging
 import os
+import sys
 import time
 import traceback
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 
-from .config import Settings, _dotted_to_nested, _merge, dump_settings, load_settings
+from .config import Settings, dotted_to_nested, dump_settings, load_settings, merge_nested
 from .errors import ConfigError, InputError, ZflocError
 from .metrics import REFERENCE_THRESHOLD, evaluate_run, position_errors, summarize
 
@@ -90,7 +92,7 @@ def user_overrides(config: str | Path | None = None, sets: Iterable[str] = ()) -
         data = yaml.safe_load(Path(config).read_text()) or {}
     for item in sets:
         key, raw = item.split("=", 1)
-        data = _merge(data, _dotted_to_nested(key.strip(), yaml.safe_load(raw)))
+        data = merge_nested(data, dotted_to_nested(key.strip(), yaml.safe_load(raw)))
     return data
 
 
@@ -228,6 +230,19 @@ class StudyOutcome:
         return self.ran / self.seconds if self.seconds > 0 else float("nan")
 
 
+class _Quiet:
+    """No progress display; a failed chunk still gets its line on stderr."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def write(self, text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        pass
+
+
 def run_study(
     datasets: Sequence[str],
     lengths: Sequence[int],
@@ -237,12 +252,12 @@ def run_study(
     scheduler: str | None = None,
     workers: int | None = None,
     processes: bool = True,
-    progress: bool = True,
+    progress: Callable[[int, str, str], Any] | None = None,
 ) -> StudyOutcome:
     """Plan, run the unfinished cells (workers=0: in this process, no dask), write the
-    outputs. Returns the sorted rows and the summary."""
-    from .tools.cli_support import Progress
-
+    outputs. Returns the sorted rows and the summary. progress(total, description, unit):
+    a counter with update(n), write(text) and close() (the CLI passes its progress bar;
+    this layer draws none itself); None or False: no display, a failed chunk's line on stderr."""
     overrides = overrides or {}
     settings = load_settings(overrides=overrides)
     lengths = sorted({int(x) for x in lengths}, reverse=True)
@@ -258,7 +273,7 @@ def run_study(
         raise InputError(f"no chunk of {min(lengths)} frames fits in {', '.join(datasets)}")
     finished = load_finished(out)
     todo = [c for c in cells if finished.get(c.key, {}).get("error", "x") is not None]
-    bar = Progress(len(cells), "study", "chunk", enabled=progress)
+    bar = progress(len(cells), "study", "chunk") if progress else _Quiet()
     bar.update(len(cells) - len(todo))
     t0 = time.perf_counter()
     with open(out / CELLS_FILE, "a") as sink:

@@ -1,7 +1,7 @@
 """Vector floorplans: DXF (ezdxf), SVG (svgelements), GeoJSON (shapely), as architects and
 facilities offices hand them out.
 
-    plan = load_vector_floorplan("plan.dxf", settings, layers=["WALLS"])   # or via Floorplan.load
+    plan = load_vector_floorplan("plan.dxf", settings, layers=["WALLS"])   # or plan_loading.load_floorplan
 
 What is read:
 - DXF: LINE, LWPOLYLINE (bulges as arcs), POLYLINE, ARC, CIRCLE, also inside block
@@ -598,7 +598,7 @@ class VectorFloorplan(Floorplan):
 
     def write_ros(self, directory, name: str = "map") -> Path:
         """The raster as a ROS map (name.yaml + name.png) whose YAML also names the drawing
-        (copied beside it), so Floorplan.load of the YAML rebuilds this vector floorplan."""
+        (copied beside it), so plan_loading.load_floorplan of the YAML rebuilds this vector floorplan."""
         out = super().write_ros(directory, name)
         if self.source is not None:
             suffix = Path(self.source[0]).suffix.lower()

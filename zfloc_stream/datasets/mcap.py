@@ -28,7 +28,7 @@ SIBLING_FLOORPLAN = "map.yaml"
 
 def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = False) -> Sequence:
     """salvage: read a truncated or damaged file as far as its intact chunks go."""
-    from ..floorplan import Floorplan
+    from ..plan_loading import load_floorplan as load_plan
     from ..session import read_session
 
     path = Path(path)
@@ -60,7 +60,7 @@ def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = F
             return session.floorplan
         sibling = path.parent / SIBLING_FLOORPLAN
         if sibling.is_file():
-            return Floorplan.load(sibling, settings=settings)
+            return load_plan(sibling, settings=settings)
         raise InputError(f"{path} carries no floorplan and there is no {SIBLING_FLOORPLAN} beside it: pass --floorplan")
 
     sequence = Sequence(

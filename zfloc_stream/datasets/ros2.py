@@ -33,8 +33,8 @@ from ..config import Settings
 from ..drops import DropCounter
 from ..errors import FrameError, InputError, SessionLogError
 from ..frames import CameraFrame, LaserFrame
+from ..messages import depth_from_msg, matrix_from_quaternion
 from ..pose_interpolation import PoseTrack
-from ..session.schemas import depth_from_msg, matrix_from_quaternion
 from .base import Sequence, register
 
 # role -> accepted schema names (rosbag2 writes "pkg/msg/Type"; older tools "pkg/Type")

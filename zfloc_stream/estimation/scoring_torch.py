@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..backbones.base import choose_device, require_torch
+from ..torch_support import choose_device, require_torch
 from .scoring import _CACHE_CHUNK, DEEP_FREE, FREE, _chunks, transform_points
 
 

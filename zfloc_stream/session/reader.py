@@ -214,7 +214,7 @@ class Session:
 
     def load_floorplan(self, settings: Settings | None = None):
         """The embedded floorplan built with the given settings, or None."""
-        from ..floorplan import Floorplan  # the floorplan stage is only needed here
+        from ..plan_loading import load_floorplan  # the floorplan stage is only needed here
 
         files = self.floorplan_files
         if not files:
@@ -231,7 +231,7 @@ class Session:
             try:
                 for name, data in files.items():
                     (Path(tmp) / name).write_bytes(data)
-                return Floorplan.load(Path(tmp) / yamls[0], settings=settings)
+                return load_floorplan(Path(tmp) / yamls[0], settings=settings)
             except ZflocError as err:
                 raise SessionLogError(f"{self.path}: embedded floorplan is unusable: {err}") from None
             except (OSError, ValueError) as err:  # names or bytes damaged in the file

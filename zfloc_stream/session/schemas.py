@@ -32,6 +32,8 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.timestamp_pb2 import Timestamp
 
 from ..errors import SessionLogError
+# image rows, depth encodings and quaternions: shared with the ROS 2 bag reader (datasets/ros2.py)
+from ..messages import DEPTH_ENCODINGS, depth_from_msg, image_rows, matrix_from_quaternion, quaternion_from_matrix  # noqa: F401
 from ..estimate import STATUSES, Alternative, Estimate
 from ..sim2 import Sim2
 
@@ -71,7 +73,6 @@ ATTACHMENT_FLOORPLAN_PREFIX = "floorplan/"
 SESSION_FORMAT = "zfloc-session/1"
 
 LABEL_ENCODINGS = ("mono8", "8UC1")
-DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
 COLOR_ENCODINGS = ("rgb8", "bgr8")  # RawImage on /camera/image
 COMPRESSED_FORMATS = ("jpeg", "jpg", "png")  # CompressedImage on /camera/image
 
@@ -114,33 +115,10 @@ def labels_to_msg(labels: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> 
     return RawImage(timestamp=to_stamp(ns), frame_id=frame_id, width=w, height=h, encoding="mono8", step=w, data=lab.tobytes())
 
 
-def _image_rows(msg: RawImage, dtype: str) -> np.ndarray:
-    """HxW array from a RawImage whose rows may be padded (step >= width * bytes)."""
-    item = np.dtype(dtype).itemsize
-    w, h, step = int(msg.width), int(msg.height), int(msg.step)
-    if w <= 0 or h <= 0:
-        raise SessionLogError(f"{msg.encoding} image has size {w}x{h}")
-    if step < w * item:
-        raise SessionLogError(f"{msg.encoding} image step {step} is shorter than a row ({w} x {item} bytes)")
-    if len(msg.data) < step * (h - 1) + w * item:
-        raise SessionLogError(f"{msg.encoding} image data holds {len(msg.data)} bytes, {w}x{h} with step {step} needs more")
-    # a strided view over the (possibly row-padded) buffer, copied into a packed array
-    return np.ndarray((h, w), dtype=dtype, buffer=msg.data, strides=(step, item)).copy()
-
-
-def depth_from_msg(msg: RawImage) -> np.ndarray:
-    """Metres, float32. 32FC1 as is; 16UC1 read as millimetres (0 stays 'no reading')."""
-    if msg.encoding == "32FC1":
-        return _image_rows(msg, "<f4").astype(np.float32)
-    if msg.encoding == "16UC1":
-        return (_image_rows(msg, "<u2").astype(np.float32) / np.float32(1000.0)).astype(np.float32)
-    raise SessionLogError(f"depth encoding '{msg.encoding}' is not supported (expected one of {', '.join(DEPTH_ENCODINGS)})")
-
-
 def labels_from_msg(msg: RawImage) -> np.ndarray:
     if msg.encoding not in LABEL_ENCODINGS:
         raise SessionLogError(f"labels encoding '{msg.encoding}' is not supported (expected mono8)")
-    return _image_rows(msg, "u1")
+    return image_rows(msg, "u1")
 
 
 def image_to_msg(rgb: np.ndarray, ns: int, frame_id: str = FRAME_CAMERA) -> RawImage:
@@ -165,7 +143,7 @@ def image_from_msg(msg) -> np.ndarray:
     if msg.encoding not in COLOR_ENCODINGS:
         raise SessionLogError(f"colour image encoding '{msg.encoding}' is not supported (expected one of {', '.join(COLOR_ENCODINGS)})")
     w = int(msg.width)
-    flat = _image_rows(RawImage(encoding=msg.encoding, width=3 * w, height=msg.height, step=msg.step, data=msg.data), "u1")
+    flat = image_rows(RawImage(encoding=msg.encoding, width=3 * w, height=msg.height, step=msg.step, data=msg.data), "u1")
     im = flat.reshape(flat.shape[0], w, 3)
     return np.ascontiguousarray(im[:, :, ::-1]) if msg.encoding == "bgr8" else im
 
@@ -199,43 +177,6 @@ def calibration_from_msg(msg: CameraCalibration) -> tuple[np.ndarray, int, int]:
 
 
 # --- poses ------------------------------------------------------------------------------------
-def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
-    """(x, y, z, w) with w >= 0, from a rotation matrix (Shepperd's branch choice)."""
-    R = np.asarray(R, dtype=float)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
-
-
-def matrix_from_quaternion(q) -> np.ndarray:
-    """Rotation matrix of (x, y, z, w); normalises first (other writers round)."""
-    q = np.asarray(q, dtype=float)
-    n = float(np.linalg.norm(q))
-    if not np.isfinite(q).all() or n < 1e-6:
-        raise SessionLogError(f"orientation quaternion {q.tolist()} is not a rotation (zero or not finite)")
-    x, y, z, w = q / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def _pose(position, quaternion) -> Pose:
     pose = Pose()
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in position)

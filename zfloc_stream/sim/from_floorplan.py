@@ -1,7 +1,7 @@
 """A simulation scene from any Floorplan (a user's ROS map or DXF/SVG/GeoJSON plan):
 `zfloc-stream demo --floorplan plan.dxf` walks through the user's own building.
 
-    scene = build_scene_from_floorplan(Floorplan.load("plan.dxf"), seed=0)
+    scene = build_scene_from_floorplan(load_floorplan("plan.dxf"), seed=0)
     sequence = simulate(scene, seed=0, n_frames=40)      # or simulate_laser(scene, ...)
 
 The walls are the floorplan's occupied cells extruded floor to ceiling, as boxes: runs of

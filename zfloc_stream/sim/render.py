@@ -79,7 +79,7 @@ class VerticalPrimitives:
         return VerticalPrimitives(self.kind[index], self.centers[index], self.half[index], self.yaw[index])
 
 
-def _box_distance(origin, dirs, centers, half, yaw, with_face: bool = False):
+def box_distance(origin, dirs, centers, half, yaw, with_face: bool = False):
     """Horizontal distance along unit 2D directions to oriented boxes (slab test in the box
     frame); arrays broadcast, inf on a miss, 0 from inside. with_face: also which of the
     four faces is hit (0..3)."""
@@ -120,7 +120,7 @@ def _fan_distances(origin, fan, prims: VerticalPrimitives, with_face: bool = Fal
     box = prims.kind == 0
     d = fan[:, None, :]
     if box.any():
-        out[:, box], face[:, box] = _box_distance(origin, d, prims.centers[box], prims.half[box],
+        out[:, box], face[:, box] = box_distance(origin, d, prims.centers[box], prims.half[box],
                                                   prims.yaw[box], with_face=True)
     if (~box).any():
         out[:, ~box] = _cylinder_distance(origin, d, prims.centers[~box], prims.half[~box, 0])
@@ -135,7 +135,7 @@ def _ray_distances(origin, dirs, idx, prims: VerticalPrimitives) -> np.ndarray:
     box = prims.kind[idx] == 0
     if box.any():
         i = idx[box]
-        out[box] = _box_distance(origin, dirs[box], prims.centers[i], prims.half[i], prims.yaw[i])
+        out[box] = box_distance(origin, dirs[box], prims.centers[i], prims.half[i], prims.yaw[i])
     if (~box).any():
         i = idx[~box]
         out[~box] = _cylinder_distance(origin, dirs[~box], prims.centers[i], prims.half[i, 0])

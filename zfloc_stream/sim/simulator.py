@@ -28,7 +28,7 @@ from ..errors import ConfigError, InputError
 from ..frames import OTHER, UNKNOWN, WALL, CameraFrame, LaserFrame
 from ..rng import make_rng
 from ..sim2 import Sim2, wrap_angle
-from .render import _box_distance, camera_pose, intrinsics, render
+from .render import box_distance, camera_pose, intrinsics, render
 from .scenes import Scene, build_scene
 from .trajectory import WalkSettings, random_walk
 
@@ -315,7 +315,7 @@ def _laser_ranges(scene: Scene, pose, s: LaserSimSettings, rng) -> tuple[np.ndar
     ranges = trace(scene.floorplan, pose[:2], dirs, s.max_range)
     tall = scene.furniture[scene.furniture[:, 5] > s.sensor_height] if s.furniture_occludes else scene.furniture[:0]
     if len(tall):
-        f = _box_distance(np.asarray(pose[:2]), dirs[:, None, :], tall[:, :2], tall[:, 2:4] / 2, tall[:, 4])
+        f = box_distance(np.asarray(pose[:2]), dirs[:, None, :], tall[:, :2], tall[:, 2:4] / 2, tall[:, 4])
         ranges = np.minimum(ranges, f.min(axis=1))
     ranges[ranges > s.max_range] = np.inf
     hit = np.isfinite(ranges)

@@ -51,14 +51,14 @@ def _split(text: str | None) -> list[str] | None:
 
 def load_floorplan(args, settings):
     """The --floorplan of a command: a ROS map YAML, an image, or a DXF/SVG/GeoJSON drawing."""
-    from ..floorplan import Floorplan
+    from ..plan_loading import load_floorplan as load_plan
     from ..vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan
 
     if args.floorplan.suffix.lower() in VECTOR_SUFFIXES:
         return load_vector_floorplan(args.floorplan, settings, scale=args.scale, layers=_split(args.layers), skip_layers=_split(args.skip_layers))
     if args.scale is not None or args.layers or args.skip_layers:
         raise ZflocError(f"--scale, --layers and --skip-layers apply to DXF/SVG/GeoJSON floorplans, not {args.floorplan.name}")
-    return Floorplan.load(args.floorplan, resolution=getattr(args, "resolution", None), origin=getattr(args, "origin", None), settings=settings)
+    return load_plan(args.floorplan, resolution=getattr(args, "resolution", None), origin=getattr(args, "origin", None), settings=settings)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -97,7 +97,7 @@ def _summary_table(result, success_distance: float) -> str:
 
 
 def run(args) -> int:
-    from ..floorplan import Floorplan
+    from ..plan_loading import load_floorplan
     from ..session import read_session
     from ..session.replay import replay_session, replay_settings, require_outputs
 
@@ -111,7 +111,7 @@ def run(args) -> int:
     if args.check:
         require_outputs(session)
     if args.floorplan is not None:
-        floorplan = Floorplan.load(args.floorplan, settings=settings)
+        floorplan = load_floorplan(args.floorplan, settings=settings)
     else:
         # built as in the recorded run (its own logged settings, if any) + the same overrides
         plan_settings = settings if session.floorplan_settings is None else replay_settings(session, args.config, args.set, base=session.floorplan_settings)

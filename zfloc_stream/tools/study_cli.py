@@ -4,11 +4,12 @@ on all local cores or a dask cluster; resumable (see zfloc_stream/study.py)."""
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
 from ..errors import InputError, ZflocError
-from .cli_support import CliParser, install_warning_format, one_line
+from .cli_support import CliParser, Progress, install_warning_format, one_line
 
 EPILOG = """examples:
   zfloc-study --dataset sim:all --lengths 15,20,35,50,100 --seeds 5 --out study-sim/
@@ -63,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
         overrides = user_overrides(args.config, args.set)
         outcome = run_study(
             args.dataset, lengths, list(range(args.seeds)), args.out, overrides=overrides,
-            scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
+            scheduler=args.scheduler, workers=args.workers,
+            progress=functools.partial(Progress, enabled=not args.no_progress),
         )
     except ZflocError as err:
         print(f"zfloc-study: error: {one_line(err)}", file=sys.stderr)
