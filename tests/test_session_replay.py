@@ -2,6 +2,7 @@
 divergence reports and clean failures on bad input."""
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -226,16 +227,23 @@ def test_numbers_beyond_the_tolerance_diverge_and_the_tolerance_is_a_setting(rec
 
 def test_a_changed_decision_is_a_divergence_at_its_frame(recorded, tmp_path, capsys):
     """A setting that changes when a mode is confirmed: the replay reports the first frame
-    where the status differs, found independently by recording both runs."""
+    where the status topic differs (the confidence, which counts confirmations, moves before
+    the status does), found independently by recording both runs."""
     from zfloc_stream.config import load_settings
 
     changed = load_settings(overrides=["tracking.confirm_rounds=4"])
-    base = [e.status for e in record_laser_session(tmp_path / "a.mcap", N)]
-    other = [e.status for e in record_laser_session(tmp_path / "b.mcap", N, settings=changed)]
-    first = next(i for i, (a, b) in enumerate(zip(base, other, strict=True)) if a != b)
+    base = record_laser_session(tmp_path / "a.mcap", N)
+    other = record_laser_session(tmp_path / "b.mcap", N, settings=changed)
+    same_confidence = [a.confidence == b.confidence or (math.isnan(a.confidence) and math.isnan(b.confidence)) for a, b in zip(base, other, strict=True)]
+    differs = [a.status != b.status or not same for a, b, same in zip(base, other, same_confidence)]
+    assert any(a.status != b.status for a, b in zip(base, other))  # the setting changes a decision
+    first = differs.index(True)
+    field = "status" if base[first].status != other[first].status else "confidence"
+    logged, replayed = ((repr(base[first].status), repr(other[first].status)) if field == "status"
+                        else (f"{base[first].confidence:.6g}", f"{other[first].confidence:.6g}"))
     assert main([str(recorded), "--check", "--set", "tracking.confirm_rounds=4"]) == 1
     out = capsys.readouterr().out
-    assert f"DIVERGED at frame {first}, /zfloc/status: status: logged {base[first]!r}, replay {other[first]!r}" in out, out
+    assert f"DIVERGED at frame {first}, /zfloc/status: {field}: logged {logged}, replay {replayed}" in out, out
 
 
 def test_a_swapped_mode_order_is_a_decision(tmp_path, capsys):
