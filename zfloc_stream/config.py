@@ -204,7 +204,7 @@ class EstimatorSettings(Section):
     # compiled with numba (the optional [fast] extra, zfloc_stream/numba_support.py): the
     # same decisions within the cross-machine tolerance (estimation/*_numba.py say which
     # kernels are bit for bit), several times faster.
-    kernels: Literal["numpy", "numba"] = "numpy"
+    kernels: Literal["numpy", "numba"] = "numba"
     # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this
@@ -396,13 +396,16 @@ class LocalizerSettings(Section):
     # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
     # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
     release_memory: bool = True
-    # Where a round runs (localizer.py). inline: inside the push of the frame that starts
-    # it, applied at once (the reference: every published number and recorded session).
-    # pipelined: on one worker beside the stream, applied exactly join_delay frames later
-    # (push blocks there if the worker is late), so push costs about one fusion. delayed:
-    # computed inline but applied join_delay frames later: bit for bit what pipelined gives,
-    # without a worker (studies, tests).
-    pipeline: Literal["inline", "pipelined", "delayed"] = "inline"
+    # Where a round runs (localizer.py). online (default, the Localizer API and `run`): a
+    # round runs inline while no pose exists (the first pose lands at the frame whose round
+    # finds it, as inline gives it) and, once there is a pose, on one worker beside the
+    # stream, applied exactly join_delay frames later; whether a round is inline is decided
+    # by the state at its start frame, so a run replays bit for bit. inline: inside the push
+    # of the frame that starts it, applied at once (studies: offline, no latency to hide).
+    # pipelined: every round on the worker, applied join_delay frames later (push blocks
+    # there if the worker is late), so push costs about one fusion. delayed: computed inline
+    # but applied join_delay frames later: bit for bit what pipelined gives, without a worker.
+    pipeline: Literal["online", "inline", "pipelined", "delayed"] = "online"
     join_delay: int = Field(0, ge=0, le=10_000)  # frames from a round's start to its result (pipelined / delayed); 0 = every_k_frames
     worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
 
@@ -410,7 +413,8 @@ class LocalizerSettings(Section):
 
     @property
     def round_delay(self) -> int:
-        """Frames between the start of a round and the frame its result is applied at."""
+        """Frames between the start of a round and the frame its result is applied at (online:
+        of the rounds that start once a pose exists; the others are inline)."""
         if self.pipeline == "inline":
             return 0
         return self.join_delay or self.every_k_frames

@@ -23,7 +23,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import yaml
-from scipy import ndimage
 
 from .config import Settings
 from .errors import FloorplanError, InputError
@@ -110,6 +109,8 @@ class Floorplan:
         self.wall_points = self.cell_to_world(rows, cols)
         # Wall faces: wall cells next to a non-wall cell. The BEV sees wall surfaces, so the
         # floorplan's lines and circles are extracted from faces, not thick wall interiors.
+        from scipy import ndimage  # here: ~0.25 s that a CLI error must not pay
+
         interior = ndimage.binary_erosion(self.occupied, border_value=1)
         frows, fcols = np.nonzero(self.occupied & ~interior)
         self.face_points = self.cell_to_world(frows, fcols)
@@ -299,6 +300,8 @@ class Floorplan:
     @cached_property
     def circles(self) -> CircleSet:
         cfg = self.settings
+        from scipy import ndimage
+
         # Only isolated wall blobs (no wider than a pillar) can be pillars in a floorplan.
         labels, count = ndimage.label(self.occupied, structure=np.ones((3, 3), dtype=bool))
         if count == 0:

@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .floorplan import Floorplan  # noqa: E402
-from .sim2 import Sim2  # noqa: E402
+if TYPE_CHECKING:
+    from .floorplan import Floorplan
+    from .sim2 import Sim2
 
 
 def save_overlay(
@@ -24,6 +22,10 @@ def save_overlay(
     title: str = "",
 ) -> Path:
     """estimated / truth: (N, 3) poses in the floorplan (rows of NaN where none)."""
+    import matplotlib  # here, not at import: a CLI error must not wait ~0.5 s for it
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
     x0, y0 = floorplan.origin
     h, w = floorplan.occupied.shape
     res = floorplan.resolution

@@ -15,11 +15,9 @@ wall fragment or a corner.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
-from sklearn.cluster import HDBSCAN
 
+# scipy.sparse / scipy.spatial / scikit-learn are imported where they are used: together
+# about 1.5 s, which a CLI that only reports a bad argument must not pay.
 from .config import CircleSettings, LineSettings
 from .errors import InputError
 from .geometry import CircleSet, LineSet
@@ -103,6 +101,8 @@ def extract_lines(points, settings: LineSettings, rng: np.random.Generator, kern
         from .primitives_numba import extract_lines as compiled
 
         return compiled(pts, settings, rng)
+    from scipy.spatial import cKDTree
+
     n = len(pts)
     if n < max(settings.min_points, 2):
         return LineSet.empty()
@@ -294,6 +294,10 @@ def _candidate_groups(pts: np.ndarray, settings: CircleSettings) -> tuple[np.nda
     than a pillar of max_radius (a wall, a room) cannot hold an isolated circle, so it is
     dropped before HDBSCAN, which keeps clustering cheap on large BEVs and floorplans.
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     n = len(pts)
     pairs = cKDTree(pts).query_pairs(settings.group_link_distance, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
@@ -324,6 +328,8 @@ def extract_circles(points, settings: CircleSettings, rng: np.random.Generator, 
     keep, group = _candidate_groups(pts, settings)
     if len(keep) < settings.min_cluster_size:
         return CircleSet.empty()
+    from sklearn.cluster import HDBSCAN
+
     sub = pts[keep]
     # allow_single_cluster: after the group filter one pillar may be all that is left.
     labels = HDBSCAN(

@@ -32,12 +32,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import LineSet
-from .numba_support import njit, require_numba
+import numba as _numba
+from llvmlite import ir  # numba's own dependency
+from numba.core import cgutils
+from numba.extending import intrinsic
 
-_numba = require_numba()
-from llvmlite import ir  # noqa: E402  (numba's own dependency)
-from numba.core import cgutils  # noqa: E402
-from numba.extending import intrinsic  # noqa: E402
+from .numba_support import njit
 
 _BLOCK = 16  # points per bounding box of the neighbourhood scan (cKDTree's leaf size)
 _BLAS_K_BLOCK = 384  # OpenBLAS's GEMM_Q (x86-64 double): rows per partial sum of q.T @ q

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import scipy.fft as sfft
 
 from ..config import RefineSettings
 from ..errors import InputError
@@ -84,6 +83,8 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
     """The near-wall mask padded by at least `half` zero cells (rounded up to 16 so calls
     share it), its FFT (cached per floorplan), the padded shape and the world centre of
     the padded cell (0, 0)."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     near, origin = _near_wall_mask(floorplan, cell, tolerance)
     pad = 16 * int(np.ceil(half / 16))
     key = ("spectrum", float(cell), float(tolerance), pad)
@@ -160,6 +161,8 @@ def _angle_template(local: np.ndarray, theta: float, cell: float, half: int) -> 
 def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np.ndarray:
     """The grid counts of every placement, rounded (float64, flat), computed as the
     reference always has: the float64 array an angle's peaks are picked from."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     template = np.zeros(spectrum.fft_shape, dtype=np.float32)
     np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
     # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
@@ -203,6 +206,8 @@ def _fast_grid(spectrum: _Spectrum, side: int, n_i: int, n_j: int):
 
 def _template_spectrum(ij: np.ndarray, side: int, H: int, W: int) -> np.ndarray:
     """conj(FFT) of the template on the H x W grid (complex64)."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     template = np.zeros((side, side), dtype=np.float32)
     np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
     # the template is zero outside its side x side corner: transform only those rows
@@ -236,6 +241,8 @@ def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: i
     vouch for its counts. conj_spec: the template's conjugate transform on this pass's
     grid when known (_mirrored_spectrum); it only changes float rounding, which the
     counts' check covers."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     if n_i * n_j <= per_angle or n_i < per_angle:
         return None
     H, W, values = _fast_grid(spectrum, side, n_i, n_j)

@@ -17,7 +17,6 @@ numpy's, so the models equal the numpy path's bit for bit.
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft as sfft
 
 from .. import threads
 from ..numba_support import njit
@@ -180,11 +179,15 @@ def _pick(score, n_j, per_angle, slack):
 def _forward(ij, side, H, W):
     """The template's (unconjugated) transform on the H x W grid, complex64: the row
     transforms of its side rows only, then the column transforms."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     return sfft.fft(sfft.rfft(_template(ij, side, W), axis=1), n=H, axis=0, overwrite_x=True)
 
 
 def _peaks(spec, n_i, n_j, W, per_angle):
     """(flat indices, counts) from one angle's correlation spectrum (overwritten), or None."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     # the inverse keeps only the n_i rows of valid placements before its row transform
     score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)
     best, counts, ok = _pick(score, n_j, per_angle, C._ROUNDING_SLACK)

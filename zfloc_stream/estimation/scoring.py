@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from ..config import ScoringSettings
 from ..geometry import LineSet
@@ -95,6 +94,8 @@ class FaceField:
 
     @classmethod
     def of(cls, floorplan) -> FaceField:
+        from scipy import ndimage  # here, not at import: a CLI error must not pay for it
+
         res = float(floorplan.resolution)
         origin = np.asarray(floorplan.origin, dtype=float)
         occupied = getattr(floorplan, "occupied", None)

@@ -33,7 +33,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from ..config import ScaleMode, SolverSettings
 
@@ -110,6 +109,8 @@ def scale_prior_sigma(scale_prior: float, settings: SolverSettings) -> float:
     P(|eps| <= a) = P(Gamma(1/beta) <= (a / sigma)^beta) and
     sigma = a / gammaincinv(1/beta, prob)^(1/beta).
     """
+    from scipy.special import gammaincinv  # here, not at import: a CLI error must not pay for it
+
     beta = settings.scale_prior_ggd_shape
     a = settings.scale_prior_window * scale_prior
     return float(a / gammaincinv(1.0 / beta, settings.scale_prior_prob) ** (1.0 / beta))

@@ -8,9 +8,7 @@ import argparse
 from pathlib import Path
 
 from ..config import load_settings
-from ..datasets.carmen import read_carmen
 from ..errors import InputError
-from ..mapping import map_from_log, parse_exclude
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -37,6 +35,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
+    from ..datasets.carmen import read_carmen  # here, not at import: `--help` stays fast
+    from ..mapping import map_from_log, parse_exclude
+
     settings = load_settings(args.config, args.set)
     exclude = [parse_exclude(text) for text in args.exclude]
     if not args.name or "/" in args.name:
