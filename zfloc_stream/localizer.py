@@ -342,7 +342,7 @@ class Localizer:
             start = Sim2(s, start.theta, start.apply(centre) - s * start.R @ centre)
         field = floorplan_scorer(self.floorplan, est.scoring).face_field
         refine = est.refine.model_copy(update={"outlier_distance": lc.local_outlier_distance})
-        local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed", kernels=est.kernels)[0])
+        local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed")[0])
         # a step from where it started (the drift of one round), never a jump elsewhere
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
         frames = max(1, self.frames_fused - self._local_frame)

@@ -515,7 +515,7 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     if len(models) == 0:
         return np.zeros((0, 4))
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
+    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
 
 
 def _guided_candidates(lines: LineSet, fp_lines: LineSet, warm: Sim2, cfg) -> tuple[np.ndarray, np.ndarray]:
@@ -572,7 +572,7 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
     models = model_rows(warm)
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
+    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
     scores = score_hypotheses(floorplan, view, models, cfg.scoring, kernels=cfg.kernels)
     rows = []
     for i, m in enumerate(models):
@@ -686,7 +686,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
         field = floorplan_scorer(floorplan, cfg.scoring).face_field
-        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds, kernels=cfg.kernels)
+        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
         rescored = score_hypotheses(floorplan, view, refined, cfg.scoring, kernels=cfg.kernels)
         better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
