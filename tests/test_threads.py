@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from test_bev import _assert_same_observation
 from test_localizer_pipeline import _bits, _run, _settings
-from test_ransac_numba import _assert_same_bits, _estimator, _scene
+from test_draws import _assert_same_bits, _estimator, _scene
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream.estimation import correlative_numba, ransac, refine, scoring_numba, solvers_numba
+from zfloc_stream.estimation import correlative_numba, ransac, refine, scoring_numba, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 pytest.importorskip("numba")
@@ -80,7 +80,7 @@ def split_everything(monkeypatch):
     monkeypatch.setattr(scoring_numba, "_MIN_LOOKUPS_PER_THREAD", 1)
     monkeypatch.setattr(scoring_numba, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
     monkeypatch.setattr(refine, "_MIN_MODELS_PER_THREAD", 1)
-    monkeypatch.setattr(solvers_numba, "_MIN_DRAWS_PER_THREAD", 1)
+    monkeypatch.setattr(solvers, "_MIN_DRAWS_PER_THREAD", 1)
     split = []
     run = threads.run
 
@@ -89,7 +89,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring_numba, refine, solvers_numba, correlative_numba):
+    for module in (scoring_numba, refine, solvers, correlative_numba):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 
@@ -98,7 +98,7 @@ def split_everything(monkeypatch):
 @pytest.mark.parametrize("mode", ["free", "prior"])
 def test_3l_draws_in_pieces_are_the_whole(split_everything, seed, mode):
     bev, fp = _scene(seed)
-    cfg = _estimator(mode, "numba", 0.5)
+    cfg = _estimator(mode, 0.5)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
     whole = ransac._models_3l(bev, fp, 700, cfg, a)
     with threads.limit(7):  # pieces start in the middle of a query's draws

@@ -56,7 +56,8 @@ from .correlative import correlative_models, plausible_angles
 from ..ties import descending, tie_keys
 from .refine import refine_batch
 from .scoring import BevView, distinct, floorplan_scorer, implied_poses, rank_coarse_to_fine, score_hypotheses, sparse_line_points
-from .solvers import _angle as _line_angle, solve_2c, solve_2l, solve_3l, solve_3l_indexed, solve_lc
+from .draws import admissible_triplets, draw
+from .solvers import drawn_2l, drawn_3l, normal_angle, solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
 CORRELATIVE = "correlative"
@@ -140,18 +141,6 @@ def _neighbour_lists(lines: LineSet, distance: float) -> list[np.ndarray]:
     return [np.flatnonzero(row) for row in near]
 
 
-def _ordered_triplets(neighbours: Sequence[np.ndarray]) -> np.ndarray:
-    """(T, 3) rows (i, j, k): j != k both neighbours of i."""
-    out = []
-    for i, nb in enumerate(neighbours):
-        if len(nb) < 2:
-            continue
-        j, k = np.meshgrid(nb, nb, indexing="ij")
-        keep = j != k
-        out.append(np.stack([np.full(keep.sum(), i), j[keep], k[keep]], axis=1))
-    return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
-
-
 def _ordered_pairs(neighbours: Sequence[np.ndarray]) -> np.ndarray:
     """(P, 2) rows (i, j): j a neighbour of i."""
     if not neighbours:
@@ -204,8 +193,6 @@ class _AngleTable:
         key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
         order = np.argsort(key, kind="stable")
         self.rows = rows[order]
-        # the same rows, one contiguous int32 array per column (cheap gathers)
-        self.columns = [np.ascontiguousarray(self.rows[:, k], dtype=np.int32) for k in range(self.rows.shape[1])] if self.rows.ndim == 2 else []
         counts = np.bincount(key, minlength=self.n_bins**self.q)
         self.counts = counts
         self.start = np.cumsum(counts) - counts
@@ -242,31 +229,6 @@ class _AngleTable:
         return self.start[key], np.where(valid, self.counts[key], 0)
 
 
-def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator, kernels: str = "numpy") -> tuple[np.ndarray, np.ndarray]:
-    """For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b)
-    uniform draws (with replacement) from its n_b candidates. Returns (query, table row)."""
-    if kernels == "numba":
-        from .ransac_numba import draw  # the optional [fast] extra, imported on first use
-
-        return draw(starts, sizes, fraction, rng)
-    n = sizes.sum(axis=1)
-    k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
-    query = np.repeat(np.arange(len(n)), k)
-    if len(query) == 0:
-        return query, np.zeros(0, dtype=np.int64)
-    nq = n[query]
-    u = np.minimum((rng.random(len(query)) * nq).astype(np.int64), nq - 1)
-    # The range r holding draw u (the number of cumulative sizes <= u), for all draws at
-    # once: one search in the rows' cumulative sizes laid end to end (row b shifted by
-    # b * big), which lands on position b * R + r; the table row is then
-    # starts[b, r] + u - (cum[b, r] - sizes[b, r]).
-    cum = np.cumsum(sizes, axis=1)
-    big = int(n.max()) + 1
-    base = np.arange(len(n), dtype=np.int64) * big
-    pos = np.searchsorted((cum + base[:, None]).ravel(), base[query] + u, side="right")
-    return query, u + (starts - cum + sizes).ravel()[pos]
-
-
 # --------------------------------------------------------------------------------------
 # floorplan tables (built once per floorplan object and settings)
 # --------------------------------------------------------------------------------------
@@ -290,12 +252,10 @@ class FloorplanMatches:
         alpha = _normal_angles(self.lines)
         neighbours = [np.asarray(nb, dtype=np.int64) for nb in floorplan.line_neighbours] if len(self.lines) else []
         # 3L: a line, two of its neighbours, not all parallel
-        tri = _ordered_triplets(neighbours)
-        if len(tri):
-            a = alpha[tri]
-            keep = ~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))
-            tri = tri[keep]
+        tri = admissible_triplets(neighbours, alpha, par, self.lines.lengths)[0]
         self.triplets = _AngleTable(tri, (alpha[tri[:, 1:]] - alpha[tri[:, :1]]) if len(tri) else np.zeros((0, 2)), tol)
+        # the triplets' first two lines, for the two-line solve at a fixed scale
+        self.triplet_heads = np.ascontiguousarray(self.triplets.rows[:, :2], dtype=np.int64)
         # 2L: a line and a non-parallel neighbour
         pairs = _ordered_pairs(neighbours)
         if len(pairs):
@@ -336,8 +296,7 @@ def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
 class BevSamples:
     """Every admissible minimal sample of BEV primitives, per solver."""
 
-    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float,
-                 kernels: str = "numpy"):
+    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float):
         self.lines = deduplicate_lines(obs.lines, line_settings) if len(obs.lines) else obs.lines
         self.circles = obs.circles
         par = np.deg2rad(solvers.parallel_angle_deg)
@@ -353,15 +312,7 @@ class BevSamples:
 
         def triplets(nb):
             """The admissible triplets and their sampling weights (the shortest line's length)."""
-            if kernels == "numba":  # the same table compiled (ransac_numba; a long walk's BEV holds hundreds of lines)
-                from .ransac_numba import admissible_triplets
-
-                return admissible_triplets(nb, alpha, par, lengths)
-            tri = _ordered_triplets(nb)
-            if len(tri):
-                a = alpha[tri]
-                tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
-            return tri, (lengths[tri].min(axis=1) if len(tri) else np.zeros(0))
+            return admissible_triplets(nb, alpha, par, lengths)
 
         def pairs_of(nb):
             pairs = _ordered_pairs(nb)
@@ -399,7 +350,7 @@ def _probabilities(weights: np.ndarray) -> np.ndarray | None:
 
 def _line_angles(lines: LineSet) -> np.ndarray:
     """Angle of each line's normal, as the solvers compute it for a sample's anchor."""
-    return _line_angle(lines.normals)
+    return normal_angle(lines.normals)
 
 
 def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -409,47 +360,30 @@ def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
-    if cfg.kernels == "numba" and cfg.scale_mode != "fixed":
-        from .solvers_numba import drawn_3l  # the optional [fast] extra, imported on first use
-
-        # draw and solve in one compiled loop: the same random numbers, the same models
-        return drawn_3l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.triplets.rows, bev.lines, fp.lines,
-                        _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     if cfg.scale_mode == "fixed":
-        b, f = picks[q], fp.triplets.rows[row]
-        return solve_3l(
-            bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
-        )[0]
-    # per-column int32 indices (the same lines as picks[q], rows[row]), cheaper to gather
-    b = [np.ascontiguousarray(picks[:, k], dtype=np.int32)[q] for k in range(3)]
-    f = [col[row] for col in fp.triplets.columns]
-    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers, kernels=cfg.kernels)[0]
+        # at a fixed scale the third line adds nothing: the rigid two-line solve of the
+        # anchor and the second line (solve_3l's fixed mode), drawn and solved compiled
+        return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks[:, :2], fp.triplet_heads, bev.lines, fp.lines,
+                        _line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "fixed")[0]
+    # draw and solve in one compiled loop
+    return drawn_3l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.triplets.rows, bev.lines, fp.lines,
+                    _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
     picks = bev.pairs[rng.choice(len(bev.pairs), size=n, p=bev.pair_p)]
     starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
     mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
-    if cfg.kernels == "numba":
-        from .solvers_numba import drawn_2l  # the optional [fast] extra, imported on first use
-
-        # draw and solve in one compiled loop: the same random numbers (draws, then the
-        # scale noise), the same models
-        return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.pairs.rows, bev.lines, fp.lines,
-                        _line_angles(bev.lines), fp.line_angles, scale_prior, cfg.solvers, mode)[0]
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
-    b, f = picks[q], fp.pairs.rows[row]
-    return solve_2l(
-        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], scale_prior, rng, cfg.solvers, mode
-    )[0]
+    # draw and solve in one compiled loop (the draws' random numbers, then the scale noise)
+    return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.pairs.rows, bev.lines, fp.lines,
+                    _line_angles(bev.lines), fp.line_angles, scale_prior, cfg.solvers, mode)[0]
 
 
 def _models_lc(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.line_circle[rng.choice(len(bev.line_circle), size=n, p=bev.line_circle_p)]
     starts = np.zeros((n, 1), dtype=np.int64)
     sizes = np.full((n, 1), len(fp.line_circle), dtype=np.int64)
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
+    q, row = draw(starts, sizes, cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.line_circle[row]
     return solve_lc(
         bev.lines.normals[b[:, 0]],
@@ -470,7 +404,7 @@ def _models_2c(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks, dist = bev.circle_pairs[pick], bev.circle_dist[pick]
     lo = np.searchsorted(fp.circle_dist, cfg.solvers.min_scale * dist, side="left")
     hi = np.searchsorted(fp.circle_dist, cfg.solvers.max_scale * dist, side="right")
-    q, row = _draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng, cfg.kernels)
+    q, row = draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.circle_pairs[row]
     return solve_2c(
         bev.circles.centers[b], fp.circles.centers[f], cfg.solvers, cfg.scale_mode, bev.circles.radii[b], fp.circles.radii[f]
@@ -630,7 +564,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     # ---- model estimation ------------------------------------------------------------
     full_cfg = _settings_of(floorplan)
     fp = floorplan_matches(floorplan, cfg.solvers)
-    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior, cfg.kernels)
+    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
     pool = solver_pool(cfg, bev, fp)
     warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
     blocks, labels = [], []
