@@ -1,4 +1,4 @@
-"""scoring.backend torch: the same scores as the numpy kernels (bit for bit on CPU, within one
+"""scoring.backend torch: the same scores as the compiled kernels (bit for bit on CPU, within one
 point per hypothesis on a GPU), the same localization, and one clear error without torch."""
 
 import sys

@@ -11,7 +11,7 @@ from test_draws import _assert_same_bits, _estimator, _scene
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream.estimation import correlative_numba, ransac, refine, scoring_numba, solvers
+from zfloc_stream.estimation import correlative_numba, ransac, refine, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 pytest.importorskip("numba")
@@ -77,8 +77,8 @@ def test_bad_thread_count_is_a_config_error():
 @pytest.fixture
 def split_everything(monkeypatch):
     """Every kernel call splits, however small (the real minima keep tests' small inputs whole)."""
-    monkeypatch.setattr(scoring_numba, "_MIN_LOOKUPS_PER_THREAD", 1)
-    monkeypatch.setattr(scoring_numba, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(scoring, "_MIN_LOOKUPS_PER_THREAD", 1)
+    monkeypatch.setattr(scoring, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
     monkeypatch.setattr(refine, "_MIN_MODELS_PER_THREAD", 1)
     monkeypatch.setattr(solvers, "_MIN_DRAWS_PER_THREAD", 1)
     split = []
@@ -89,7 +89,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring_numba, refine, solvers, correlative_numba):
+    for module in (scoring, refine, solvers, correlative_numba):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 

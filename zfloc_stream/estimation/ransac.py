@@ -507,7 +507,7 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     models = model_rows(warm)
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
     models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
-    scores = score_hypotheses(floorplan, view, models, cfg.scoring, kernels=cfg.kernels)
+    scores = score_hypotheses(floorplan, view, models, cfg.scoring)
     rows = []
     for i, m in enumerate(models):
         both = np.vstack([m[None], kept]) if len(kept) else m[None]
@@ -607,7 +607,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         return LocalizationResult([], {"model_estimation": t1 - t0, **zero}, 0, {"model_estimation": c1 - c0, **zero})
     sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
     view = BevView.of(obs, cfg.scoring.tau_v)
-    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring, kernels=cfg.kernels)
+    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
     t2, c2 = time.perf_counter(), time.thread_time()
 
     # ---- refinement --------------------------------------------------------------------
@@ -621,7 +621,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     if n_refine:
         field = floorplan_scorer(floorplan, cfg.scoring).face_field
         refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
-        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring, kernels=cfg.kernels)
+        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
         better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
         total[:n_refine][better] = rescored.total[better]
