@@ -11,7 +11,7 @@ from test_draws import _assert_same_bits, _estimator, _scene
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream.estimation import correlative_numba, ransac, refine, scoring, solvers
+from zfloc_stream.estimation import correlative, ransac, refine, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 pytest.importorskip("numba")
@@ -89,7 +89,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring, refine, solvers, correlative_numba):
+    for module in (scoring, refine, solvers, correlative):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 

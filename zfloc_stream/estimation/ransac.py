@@ -444,7 +444,7 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
     models = correlative_models(
         floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
-        peaks=c.peaks, angles=angles, kernels=cfg.kernels,
+        peaks=c.peaks, angles=angles,
     )
     if len(models) == 0:
         return np.zeros((0, 4))
