@@ -15,6 +15,7 @@ same way: `name: float = Field(default, gt=0, le=10)  # unit, meaning`.
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -190,6 +191,18 @@ class CorrelativeSettings(Section):
 
 
 class EstimatorSettings(Section):
+    # The hot loops of a round are compiled (numba) and have one implementation each, so
+    # the former estimator.kernels (numpy | numba) chooses nothing: older configs and
+    # session files that name it still load, with a FutureWarning, and it is dropped.
+    @model_validator(mode="before")
+    @classmethod
+    def _drop_kernels(cls, data):
+        if isinstance(data, dict) and "kernels" in data:
+            data = {k: v for k, v in data.items() if k != "kernels"}
+            warnings.warn("estimator.kernels is ignored: the compiled kernels are the only implementation "
+                          "(remove it from the config)", FutureWarning, stacklevel=2)
+        return data
+
     # prior: metric input (depth camera, VIO, depth network) known to about prior_range;
     # fixed: exactly metric (a laser; sources that know set it); free: any scale in
     # [min_scale, max_scale] (the paper's setting, on request).
@@ -200,11 +213,6 @@ class EstimatorSettings(Section):
     scoring: ScoringSettings = ScoringSettings()
     refine: RefineSettings = RefineSettings()
     ransac: RansacSettings = RansacSettings()
-    # Hot loops (coarse/full scoring, the 3L solver, the LM refinement) in plain numpy, or
-    # compiled with numba (the optional [fast] extra, zfloc_stream/numba_support.py): the
-    # same decisions within the cross-machine tolerance (estimation/*_numba.py say which
-    # kernels are bit for bit), several times faster.
-    kernels: Literal["numpy", "numba"] = "numba"
     # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this

@@ -26,8 +26,7 @@ import yaml
 
 from .config import Settings
 from .errors import FloorplanError, InputError
-from .geometry import CircleSet, LineSet
-from .primitives import as_points, deduplicate_lines, extract_circles, extract_lines, grid_subsample
+from .geometry import CircleSet, LineSet, as_points, grid_subsample
 from .rng import make_rng
 
 ROS_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -293,15 +292,19 @@ class Floorplan:
     @cached_property
     def lines(self) -> LineSet:
         cfg = self.settings
+        from .primitives import deduplicate_lines, extract_lines  # compiled (numba): imported when first needed
+
         pts = grid_subsample(self.face_points, cfg.floorplan.line_point_spacing)
         raw = extract_lines(pts, cfg.primitives.lines, make_rng(cfg.seed, "floorplan-lines"))
         return deduplicate_lines(raw, cfg.primitives.lines)
 
     @cached_property
     def circles(self) -> CircleSet:
-        cfg = self.settings
         from scipy import ndimage
 
+        from .primitives import extract_circles  # compiled (numba): imported when first needed
+
+        cfg = self.settings
         # Only isolated wall blobs (no wider than a pillar) can be pillars in a floorplan.
         labels, count = ndimage.label(self.occupied, structure=np.ones((3, 3), dtype=bool))
         if count == 0:

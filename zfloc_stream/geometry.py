@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import InputError
+
 
 @dataclass(frozen=True)
 class LineSet:
@@ -61,3 +63,27 @@ class CircleSet:
 
     def subset(self, index) -> CircleSet:
         return CircleSet(self.centers[index], self.radii[index])
+
+
+def as_points(points, name: str = "points") -> np.ndarray:
+    """(N, 2) float array of finite points, or InputError naming what is wrong."""
+    try:
+        p = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an (N, 2) array of numbers") from None
+    if p.size == 0:
+        return np.zeros((0, 2))
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise InputError(f"{name} must have shape (N, 2), got {p.shape}")
+    if not np.isfinite(p).all():
+        raise InputError(f"{name} contain NaN or inf")
+    return p
+
+
+def grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Keep the first point of each spacing x spacing cell (deterministic, order-preserving)."""
+    if len(points) == 0 or spacing <= 0:
+        return points
+    cells = np.floor(points / spacing).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    return points[np.sort(first)]
