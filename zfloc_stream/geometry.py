@@ -87,3 +87,39 @@ def grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
     cells = np.floor(points / spacing).astype(np.int64)
     _, first = np.unique(cells, axis=0, return_index=True)
     return points[np.sort(first)]
+
+
+def deduplicate_lines(lines: LineSet, settings) -> LineSet:
+    """Drop lines that repeat a longer one (settings: config.LineSettings): nearly parallel
+    (< dedup_angle_deg), nearly the same offset (the shorter one's midpoint within
+    dedup_offset of the longer line) and overlapping extents. Order (longest first) is kept."""
+    m = len(lines)
+    if m < 2:
+        return lines
+    order = np.argsort(-lines.lengths, kind="stable")
+    L = lines.subset(order)
+    d = L.endpoints[:, 1] - L.endpoints[:, 0]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    cos = np.abs(d @ d.T)
+    parallel = cos >= np.cos(np.deg2rad(settings.dedup_angle_deg))
+    mid = L.midpoints
+    # offset[i, j]: distance of j's midpoint to line i
+    offset = np.abs(mid @ L.normals.T + L.offsets[None, :]).T
+    close = offset < settings.dedup_offset
+    # extents of j projected on i's direction overlap i's extent
+    t_i0 = np.einsum("ij,ij->i", L.endpoints[:, 0], d)
+    t_i1 = np.einsum("ij,ij->i", L.endpoints[:, 1], d)
+    pj0 = L.endpoints[:, 0] @ d.T  # [j, i]
+    pj1 = L.endpoints[:, 1] @ d.T
+    lo_j, hi_j = np.minimum(pj0, pj1).T, np.maximum(pj0, pj1).T  # [i, j]
+    lo_i, hi_i = np.minimum(t_i0, t_i1)[:, None], np.maximum(t_i0, t_i1)[:, None]
+    overlap = (np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)) > 0
+    dup = parallel & close & overlap
+    np.fill_diagonal(dup, False)
+    keep = np.ones(m, dtype=bool)
+    for i in range(m):  # greedy from the longest: a kept line suppresses its shorter repeats
+        if keep[i]:
+            later = dup[i].copy()
+            later[: i + 1] = False
+            keep &= ~later
+    return L.subset(np.flatnonzero(keep))

@@ -43,8 +43,7 @@ import yaml
 from .config import Settings
 from .errors import FloorplanError
 from .floorplan import Floorplan
-from .geometry import CircleSet, LineSet
-from .primitives import deduplicate_lines
+from .geometry import CircleSet, LineSet, deduplicate_lines
 
 VECTOR_SUFFIXES = (".dxf", ".svg", ".geojson", ".json")
 ARC_CHORD = 0.05  # m, arcs and curves are flattened to chords deviating at most this much

@@ -13,7 +13,6 @@ from tqdm import tqdm
 from ..config import Settings
 from ..estimate import Estimate
 from ..floorplan import Floorplan
-from ..localizer import Localizer
 from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
@@ -56,6 +55,8 @@ def run_session(
     session holds their depth and labels and replays without them."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    from ..localizer import Localizer  # here: the compiled kernels (numba) load only once inputs are valid
+
     localizer = Localizer(floorplan, settings, perception)
     if perception is not None:
         frames = perception.stream(frames)
