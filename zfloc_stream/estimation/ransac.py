@@ -55,7 +55,8 @@ from ..sim2 import Sim2, wrap_angle
 from .correlative import correlative_models, plausible_angles
 from ..ties import descending, tie_keys
 from .refine import refine_batch
-from .scoring import BevView, distinct, floorplan_scorer, implied_poses, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .views import BevView, implied_poses
 from .draws import admissible_triplets, draw
 from .solvers import drawn_2l, drawn_3l, normal_angle, solve_2c, solve_2l, solve_3l, solve_lc
 

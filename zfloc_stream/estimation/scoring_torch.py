@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backbones.base import choose_device, require_torch
-from .scoring import DEEP_FREE, FREE, transform_points
+from .views import DEEP_FREE, FREE, transform_points
 
 _CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk
 
