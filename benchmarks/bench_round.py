@@ -201,6 +201,47 @@ def push_latency(frames, floorplan, overrides, rate: float) -> dict:
             "wait_max": np.nanmax(np.array(waits) * 1000) if np.isfinite(waits).any() else 0.0}
 
 
+def default_cases():
+    """(name, floorplan, frames, base overrides) of the real data the defaults are timed on:
+    the shared camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior, the
+    default scale mode) and 50-scan Carmen laser windows of fhw and intel (fixed scale)
+    against the map of the log without the window."""
+    for name in ("belgioioso-camera-50", "fhw-camera-50"):
+        path = SHARED / "sessions" / name / "session.mcap"
+        if path.exists():
+            yield name, Floorplan.load(path.parent / "map.yaml", settings=load_settings()), list(read_session(path).frames()), []
+    for log in ("fhw", "intel"):
+        path = SHARED / "carmen" / f"{log}-corrected.log.gz"
+        if not path.exists():
+            continue
+        overrides = ["estimator.scale_mode=fixed"]
+        seq = carmen_sequence(path, load_settings(overrides=overrides))
+        start = len(seq.ground_truth) // 3
+        yield f"laser {log} [{start}, {start + 50})", seq.floorplan_for(start, start + 50), list(seq.frames(start, start + 50)), overrides
+
+
+def defaults_latency(frames, floorplan, overrides, rate: float) -> dict:
+    """Push wall times through the Python API with the package's defaults (plus the case's
+    overrides), after one warm-up pass over the same frames: median, p99, amortized (all
+    push time / frames: with back-to-back pushes it includes any wait for a worker's round)
+    and the first frame with a pose."""
+    settings = load_settings(overrides=overrides)
+    for warm in (True, False):
+        walls, first = [], None
+        with Localizer(floorplan, settings) as loc:
+            start = time.perf_counter()
+            for i, frame in enumerate(frames):
+                if rate > 0:
+                    time.sleep(max(0.0, start + i / rate - time.perf_counter()))
+                t0 = time.perf_counter()
+                est = loc.push(frame)
+                walls.append(time.perf_counter() - t0)
+                if first is None and est.pose is not None:
+                    first = i
+    w = np.array(walls) * 1000
+    return {"median": np.median(w), "p99": np.percentile(w, 99), "amortized": w.sum() / len(w), "first": first}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer cases and frames")
@@ -210,7 +251,20 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second the latency runs feed (0: back to back)")
     ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs (s; Python's default 0.005)")
     ap.add_argument("--set", action="append", default=[], help="dotted.key=value for every run")
+    ap.add_argument("--defaults", action="store_true",
+                    help="only: push latency with the package defaults on the shared real camera sessions and laser logs "
+                         "(run it once with this tree and once with another checkout on PYTHONPATH to compare defaults)")
     args = ap.parse_args()
+    if args.defaults:
+        import zfloc_stream
+
+        print(f"defaults of {Path(zfloc_stream.__file__).parent}: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; "
+              f"push ms, one warm-up pass, frames {'back to back' if args.rate <= 0 else f'at {args.rate:g} Hz'}", flush=True)
+        for name, plan, frames, overrides in default_cases():
+            s = defaults_latency(frames, plan, overrides + args.set, args.rate)
+            print(f"  {name:34s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  amortized {s['amortized']:6.1f}  "
+                  f"first pose at frame {s['first']}", flush=True)
+        return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
     if not args.skip_stages:
         for cases in (scene_cases, session_cases, carmen_cases):
