@@ -180,25 +180,28 @@ def carmen_cases(quick: bool):
         yield f"carmen intel [{start}, {start + length})", seq.floorplan_for(start, start + length), list(seq.frames(start, start + length)), overrides
 
 
-def push_latency(frames, floorplan, overrides, rate: float) -> dict:
-    """Push wall times with frames arriving at `rate` Hz (0: back to back), as from a camera:
-    the worker's time between arrivals is what pipelining puts to use."""
-    settings = load_settings(overrides=overrides)
-    walls, rounds, waits = [], [], []
+def timed_pushes(frames, floorplan, settings, rate: float) -> tuple[np.ndarray, list]:
+    """Each push's wall time (ms) and estimate, frames arriving at `rate` Hz (0: back to back)."""
+    walls, estimates = [], []
     with Localizer(floorplan, settings) as loc:
         start = time.perf_counter()
         for i, frame in enumerate(frames):
             if rate > 0:
                 time.sleep(max(0.0, start + i / rate - time.perf_counter()))
             t0 = time.perf_counter()
-            est = loc.push(frame)
+            estimates.append(loc.push(frame))
             walls.append(time.perf_counter() - t0)
-            if {"round_start", "round_wait", "model_estimation"} & est.timings.keys():
-                rounds.append(walls[-1])
-            waits.append(est.timings.get("round_wait", np.nan))
-    w, r = np.array(walls) * 1000, np.array(rounds) * 1000
+    return np.array(walls) * 1000, estimates
+
+
+def push_latency(frames, floorplan, overrides, rate: float) -> dict:
+    """Push wall times with frames arriving at `rate` Hz (0: back to back), as from a camera:
+    the worker's time between arrivals is what pipelining puts to use."""
+    w, estimates = timed_pushes(frames, floorplan, load_settings(overrides=overrides), rate)
+    r = np.array([t for t, e in zip(w, estimates) if {"round_start", "round_wait", "model_estimation"} & e.timings.keys()])
+    waits = np.array([e.timings.get("round_wait", np.nan) for e in estimates]) * 1000
     return {"median": np.median(w), "p99": np.percentile(w, 99), "max": w.max(), "round_max": r.max() if len(r) else np.nan,
-            "wait_max": np.nanmax(np.array(waits) * 1000) if np.isfinite(waits).any() else 0.0}
+            "wait_max": np.nanmax(waits) if np.isfinite(waits).any() else 0.0}
 
 
 def default_cases():
@@ -226,19 +229,9 @@ def defaults_latency(frames, floorplan, overrides, rate: float) -> dict:
     push time / frames: with back-to-back pushes it includes any wait for a worker's round)
     and the first frame with a pose."""
     settings = load_settings(overrides=overrides)
-    for warm in (True, False):
-        walls, first = [], None
-        with Localizer(floorplan, settings) as loc:
-            start = time.perf_counter()
-            for i, frame in enumerate(frames):
-                if rate > 0:
-                    time.sleep(max(0.0, start + i / rate - time.perf_counter()))
-                t0 = time.perf_counter()
-                est = loc.push(frame)
-                walls.append(time.perf_counter() - t0)
-                if first is None and est.pose is not None:
-                    first = i
-    w = np.array(walls) * 1000
+    timed_pushes(frames, floorplan, settings, rate)  # warm-up: caches, kernels
+    w, estimates = timed_pushes(frames, floorplan, settings, rate)
+    first = next((i for i, e in enumerate(estimates) if e.pose is not None), None)
     return {"median": np.median(w), "p99": np.percentile(w, 99), "amortized": w.sum() / len(w), "first": first}
 
 
