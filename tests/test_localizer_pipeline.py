@@ -182,3 +182,11 @@ def test_online_replays_bit_for_bit_on_a_thread_or_a_process(laser):
     a = _run(floorplan, frames, _settings("localizer.pipeline=online"))
     b = _run(floorplan, frames, _settings("localizer.pipeline=online", "localizer.worker=process"))
     assert [_bits(e) for e in a] == [_bits(e) for e in b]
+
+
+def test_studies_run_rounds_inline_unless_told_otherwise():
+    from zfloc_stream.study import cell_settings
+
+    assert cell_settings({}, seed=3).localizer.pipeline == "inline"
+    assert cell_settings({"localizer": {"pipeline": "online"}}, seed=3).localizer.pipeline == "online"
+    assert cell_settings({}, 3, {"estimator": {"scale_mode": "fixed"}}).localizer.pipeline == "inline"

@@ -217,7 +217,7 @@ class EstimatorSettings(Section):
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this
     # process may use (at most threads.AUTO_MAX), less one for the stream when the round
-    # runs beside it (localizer.pipeline: pipelined).
+    # runs on the worker beside it (localizer.pipeline: online once a pose exists, pipelined).
     threads: int = Field(0, ge=0, le=256)
 
 
