@@ -14,9 +14,10 @@ Where the round runs (localizer.pipeline): inline, inside the push of the frame 
 starts it and applied there; or pipelined, on one worker beside the stream and applied at
 frame i + round_delay exactly (that push waits if the worker is late), never "when it is
 ready", so a run is deterministic. online (the default) is inline while no pose exists and
-nothing is pending (the first fix lands as early as inline gives it) and pipelined after. A round works on what it saw at frame i: a copy of the
-BEV grid, the tracker's warm starts and search mode, its rng (seeded by i), and at the
-join the tracker is updated with frame i's sensor position and index. `delayed` computes
+nothing is pending (the first fix lands as early as inline gives it) and pipelined after.
+A round works on what it saw at frame i: a copy of the BEV grid, the tracker's warm starts
+and search mode, its rng (seeded by i), and at the join the tracker is updated with frame
+i's sensor position and index. `delayed` computes
 the round inline at frame i and applies it at the same join frame: bit for bit the
 pipelined results without a worker. close() (or leaving the `with`) stops the worker;
 rounds whose join frame no frame reached are dropped: the last estimate stays the last
@@ -49,6 +50,7 @@ from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
 from .rng import make_rng
 from .sim2 import Sim2
+from .tracking import HypothesisTracker
 
 
 @dataclass(frozen=True)
@@ -157,8 +159,6 @@ class Localizer:
         self.settings = settings or Settings()
         self.perception = perception
         self.floorplan = floorplan
-        from .tracking import HypothesisTracker  # here: filterpy pulls in scipy.stats (~0.4 s)
-
         self.bev = RollingBEV(self.settings)
         self.tracker = HypothesisTracker(self.settings.tracking)
         self.frames_pushed = 0
