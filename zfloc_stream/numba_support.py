@@ -19,7 +19,7 @@ import numba
 from numba.core import event
 
 COMPILE_NOTICE = (
-    "zfloc-stream: compiling the numba kernels (once per machine, cached; about a minute on the first run) ..."
+    "zfloc-stream: compiling the numba kernels (once per machine, cached; this can take a few minutes) ..."
 )
 
 _notice_lock = threading.Lock()
