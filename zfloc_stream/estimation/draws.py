@@ -27,7 +27,7 @@ def cumulate(sizes, b, cum):
 @njit
 def draw_row(starts, sizes, cum, b, n, uniform):
     """The table row of one draw for query b with n > 0 candidates, cum from cumulate:
-    uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1), as the numpy path)
+    uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1))
     and mapped to starts[b, r] + u - (cum[b, r] - sizes[b, r]), r the range holding u: the
     number of cumulative counts <= u, as numpy's searchsorted(side="right") finds it
     (counted without branches: which range a random draw lands in is unpredictable).

@@ -137,9 +137,9 @@ def _coarse_kernel(models, c, sn, inv, ox, oy, px, py, grid, h, w, index_type, o
         for j in range(n):
             x = ai * px[j] - bi * py[j] + cui
             y = bi * px[j] + ai * py[j] + cvi
-            # np.clip, as selects (branch-free, so the loop vectorises); the first select
-            # also sends NaN (where numpy's take raises) to the border ring, which reads
-            # as far from any wall, instead of an arbitrary address
+            # clipped by selects (branch-free, so the loop vectorises); the first select
+            # also sends NaN to the border ring, which reads as far from any wall, instead
+            # of an arbitrary address
             x = x if x >= zero else zero
             x = x if x <= col_max else col_max
             y = y if y >= zero else zero
@@ -210,8 +210,7 @@ def _violation_kernel(tx, ty, c, sn, k, c0, c1, r0, r1, empty, bucket_start, n_c
                 u = (ci * dx + si * dy) * ki - ou
                 v = (-si * dx + ci * dy) * ki - ov
                 if not (u >= 0 and u < w and v >= 0 and v < h):
-                    continue  # state 0 (unseen) in the numpy path
-                # inside the grid numpy's clip changes nothing the truncation keeps
+                    continue  # outside the BEV grid: unseen
                 s = state[np.int64(v) * w + np.int64(u)]
                 if s == DEEP_FREE:
                     n_bad += 1
@@ -224,13 +223,10 @@ def _violation_kernel(tx, ty, c, sn, k, c0, c1, r0, r1, empty, bucket_start, n_c
 
 @njit
 def _greedy_distinct_kernel(x, y, ang, max_distance, max_angle, limit, kept):
-    """scoring._greedy_distinct: walks the hypotheses in order and keeps one unless a kept
-    one lies within max_distance (hypot of the implied-position difference) and max_angle
+    """Greedy suppression: walks the hypotheses in order and keeps one unless a kept one
+    lies within max_distance (hypot of the implied-position difference) and max_angle
     (|wrap_angle| of the heading difference), until `limit` are kept; returns how many
-    (their indices in kept). A hypothesis survives the numpy loop exactly when no kept
-    earlier one is near it, which is what is tested here, with the same operations:
-    libm's hypot (numpy's np.hypot calls it too) and Python's float modulo (numpy's
-    remainder has the same definition), so every comparison gives the same answer."""
+    (their indices in kept)."""
     two_pi = 2.0 * np.pi
     n_kept = 0
     for j in range(x.shape[0]):
