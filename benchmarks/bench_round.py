@@ -37,6 +37,10 @@ compiled kernels) against the commit before (4c13297: inline, numpy), ms:
     laser fhw                9.0 -> 4.2   661 -> 219   102 -> 16    4 -> 4
     laser intel              3.9 -> 3.8   562 -> 109    85 -> 13    4 -> 4
 
+A second back-to-back run at load average 10.6-11.1 (old -> new, median / p99 / amortized):
+belgioioso camera 11.7 -> 19.7 / 668 -> 150 / 97 -> 37; fhw camera 11.9 -> 51.6 / 541 ->
+498 / 85 -> 95; laser fhw 11.3 -> 16.1 / 611 -> 674 / 92 -> 59; laser intel 9.7 -> 13.4 /
+446 -> 176 / 79 -> 29. Under this load the runs vary by 2x; fhw camera was worse this time.
 The first pose lands at the same frame. The p99 of 50 frames is set by the one or two
 rounds that run inline before the first pose (by design: the first fix is not delayed);
 back to back, a join also waits for the worker's round, and the median grows because the
