@@ -42,7 +42,7 @@ from .estimate import Alternative, Estimate
 from .estimation import localize
 from .estimation.ransac import LocalizationResult, alignment_of, model_rows
 from .estimation.refine import refine_batch
-from .estimation.scoring import floorplan_scorer
+from .estimation.scoring import floorplan_scorer, scoring_kernels
 from .floorplan import Floorplan
 from .heap import release_free_heap
 from .frames import CameraFrame, LaserFrame
@@ -159,6 +159,10 @@ class Localizer:
         self.settings = settings or Settings()
         self.perception = perception
         self.floorplan = floorplan
+        # the scorer backend (scoring.backend: the compiled FloorplanScorer or torch's) is
+        # chosen and built once, here: a missing [torch] extra or a bad device is one error
+        # now, not at the first round; rounds find it in the per-floorplan cache
+        scoring_kernels(floorplan, self.settings.estimator.scoring)
         self.bev = RollingBEV(self.settings)
         self.tracker = HypothesisTracker(self.settings.tracking)
         self.frames_pushed = 0
