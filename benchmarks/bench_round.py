@@ -17,6 +17,35 @@ worker thread; --process adds a worker process). Frames are rendered before timi
 
     python benchmarks/bench_round.py --quick        # a few minutes on 2 cores
     python benchmarks/bench_round.py                # more scenes, frames and windows
+    python benchmarks/bench_round.py --defaults --rate 0      # the package defaults on real data
+    PYTHONPATH=../main python benchmarks/bench_round.py --defaults --rate 0   # another checkout's
+
+--defaults (issue 25): push latency with the defaults through the Python API on the shared
+camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior) and two 50-scan
+Carmen laser windows (fhw, intel; fixed scale), one warm-up pass. Measured on 2026-12-03 on
+the shared 2-core machine at load average 7-7.7 (other jobs), new defaults (online,
+compiled kernels) against the commit before (4c13297: inline, numpy), ms:
+
+    frames back to back     median        p99          amortized    first pose
+    belgioioso camera       19.3 -> 40.6  937 -> 243   159 -> 63    4 -> 4
+    fhw camera              17.3 -> 35.7  891 -> 279   137 -> 67    4 -> 4
+    laser fhw               10.0 -> 23.9  583 -> 700    96 -> 90    4 -> 4
+    laser intel             11.0 -> 19.0  447 -> 256    80 -> 46    4 -> 4
+    at 10 Hz
+    belgioioso camera        7.9 -> 16.4  346 -> 156    59 -> 24    4 -> 4
+    fhw camera              12.1 -> 17.4  502 -> 107    87 -> 22    4 -> 4
+    laser fhw                9.0 -> 4.2   661 -> 219   102 -> 16    4 -> 4
+    laser intel              3.9 -> 3.8   562 -> 109    85 -> 13    4 -> 4
+
+A second back-to-back run at load average 10.6-11.1 (old -> new, median / p99 / amortized):
+belgioioso camera 11.7 -> 19.7 / 668 -> 150 / 97 -> 37; fhw camera 11.9 -> 51.6 / 541 ->
+498 / 85 -> 95; laser fhw 11.3 -> 16.1 / 611 -> 674 / 92 -> 59; laser intel 9.7 -> 13.4 /
+446 -> 176 / 79 -> 29. Under this load the runs vary by 2x; fhw camera was worse this time.
+The first pose lands at the same frame. The p99 of 50 frames is set by the one or two
+rounds that run inline before the first pose (by design: the first fix is not delayed);
+back to back, a join also waits for the worker's round, and the median grows because the
+worker shares the two loaded cores with the stream. The issue's targets (p99 <= 15 ms,
+amortized <= 10 ms, quiet machine) were not reached here; this machine was never quiet.
 
 Measured on the shared 2-core machine under load average 6-7 from other jobs (so walls are
 ~1.5x CPU), `--quick`: a round (wall median) takes 180 ms on the apartment camera, 340 ms on
@@ -180,25 +209,61 @@ def carmen_cases(quick: bool):
         yield f"carmen intel [{start}, {start + length})", seq.floorplan_for(start, start + length), list(seq.frames(start, start + length)), overrides
 
 
-def push_latency(frames, floorplan, overrides, rate: float) -> dict:
-    """Push wall times with frames arriving at `rate` Hz (0: back to back), as from a camera:
-    the worker's time between arrivals is what pipelining puts to use."""
-    settings = load_settings(overrides=overrides)
-    walls, rounds, waits = [], [], []
+def timed_pushes(frames, floorplan, settings, rate: float) -> tuple[np.ndarray, list]:
+    """Each push's wall time (ms) and estimate, frames arriving at `rate` Hz (0: back to back)."""
+    walls, estimates = [], []
     with Localizer(floorplan, settings) as loc:
         start = time.perf_counter()
         for i, frame in enumerate(frames):
             if rate > 0:
                 time.sleep(max(0.0, start + i / rate - time.perf_counter()))
             t0 = time.perf_counter()
-            est = loc.push(frame)
+            estimates.append(loc.push(frame))
             walls.append(time.perf_counter() - t0)
-            if {"round_start", "round_wait", "model_estimation"} & est.timings.keys():
-                rounds.append(walls[-1])
-            waits.append(est.timings.get("round_wait", np.nan))
-    w, r = np.array(walls) * 1000, np.array(rounds) * 1000
+    return np.array(walls) * 1000, estimates
+
+
+def push_latency(frames, floorplan, overrides, rate: float) -> dict:
+    """Push wall times with frames arriving at `rate` Hz (0: back to back), as from a camera:
+    the worker's time between arrivals is what pipelining puts to use."""
+    w, estimates = timed_pushes(frames, floorplan, load_settings(overrides=overrides), rate)
+    r = np.array([t for t, e in zip(w, estimates) if {"round_start", "round_wait", "model_estimation"} & e.timings.keys()])
+    waits = np.array([e.timings.get("round_wait", np.nan) for e in estimates]) * 1000
     return {"median": np.median(w), "p99": np.percentile(w, 99), "max": w.max(), "round_max": r.max() if len(r) else np.nan,
-            "wait_max": np.nanmax(np.array(waits) * 1000) if np.isfinite(waits).any() else 0.0}
+            "wait_max": np.nanmax(waits) if np.isfinite(waits).any() else 0.0}
+
+
+def default_cases():
+    """(name, floorplan, frames, base overrides) of the real data the defaults are timed on:
+    the shared camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior, the
+    default scale mode) and 50-scan Carmen laser windows of fhw and intel (fixed scale)
+    against the map of the log without the window."""
+    for name in ("belgioioso-camera-50", "fhw-camera-50"):
+        path = SHARED / "sessions" / name / "session.mcap"
+        if path.exists():
+            yield name, Floorplan.load(path.parent / "map.yaml", settings=load_settings()), list(read_session(path).frames()), []
+    for log in ("fhw", "intel"):
+        path = SHARED / "carmen" / f"{log}-corrected.log.gz"
+        if not path.exists():
+            continue
+        overrides = ["estimator.scale_mode=fixed"]
+        seq = carmen_sequence(path, load_settings(overrides=overrides))
+        start = len(seq.ground_truth) // 3
+        yield f"laser {log} [{start}, {start + 50})", seq.floorplan_for(start, start + 50), list(seq.frames(start, start + 50)), overrides
+
+
+def defaults_latency(frames, floorplan, overrides, rate: float) -> dict:
+    """Push wall times through the Python API with the package's defaults (plus the case's
+    overrides), after one warm-up pass over the same frames: median, p99, amortized (all
+    push time / frames: with back-to-back pushes it includes any wait for a worker's round)
+    and the first frame with a pose."""
+    settings = load_settings(overrides=overrides)
+    timed_pushes(frames, floorplan, settings, rate)  # warm-up: caches, kernels
+    w, estimates = timed_pushes(frames, floorplan, settings, rate)
+    first = next((i for i, e in enumerate(estimates) if e.pose is not None), None)
+    after = w[first + 1:] if first is not None and first + 1 < len(w) else w[:0]
+    return {"median": np.median(w), "p99": np.percentile(w, 99), "amortized": w.sum() / len(w), "first": first,
+            "p99_after": np.percentile(after, 99) if len(after) else np.nan}
 
 
 def main() -> None:
@@ -210,7 +275,20 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second the latency runs feed (0: back to back)")
     ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs (s; Python's default 0.005)")
     ap.add_argument("--set", action="append", default=[], help="dotted.key=value for every run")
+    ap.add_argument("--defaults", action="store_true",
+                    help="only: push latency with the package defaults on the shared real camera sessions and laser logs "
+                         "(run it once with this tree and once with another checkout on PYTHONPATH to compare defaults)")
     args = ap.parse_args()
+    if args.defaults:
+        import zfloc_stream
+
+        print(f"defaults of {Path(zfloc_stream.__file__).parent}: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; "
+              f"push ms, one warm-up pass, frames {'back to back' if args.rate <= 0 else f'at {args.rate:g} Hz'}", flush=True)
+        for name, plan, frames, overrides in default_cases():
+            s = defaults_latency(frames, plan, overrides + args.set, args.rate)
+            print(f"  {name:34s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  amortized {s['amortized']:6.1f}  "
+                  f"first pose at frame {s['first']}  p99 after it {s['p99_after']:6.1f}", flush=True)
+        return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
     if not args.skip_stages:
         for cases in (scene_cases, session_cases, carmen_cases):

@@ -182,6 +182,7 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
         estimates.append(localizer.push(f))
         plane_poses.append(localizer.bev.plane_pose(f))  # as fused (scan matching corrects the odometry)
     seconds = time.perf_counter() - t0
+    localizer.close()  # stops an online / pipelined worker (its estimates are all in)
     localizer.plane_poses = plane_poses
     errors = position_errors([e.pose for e in estimates], truth)
     row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),

@@ -28,10 +28,10 @@ def run_one(scene_name: str, seed: int, n_frames: int, overrides: list[str]) -> 
     settings = load_settings(overrides=overrides).model_copy(update={"seed": seed})
     scene = build_scene(scene_name, seed=seed)
     sequence = simulate(scene, SimSettings(), seed=seed, n_frames=n_frames)
-    localizer = Localizer(scene.floorplan, settings)
-    t0 = time.perf_counter()
-    estimates = [localizer.push(frame) for frame in sequence]
-    seconds = time.perf_counter() - t0
+    with Localizer(scene.floorplan, settings) as localizer:  # closing stops an online round worker
+        t0 = time.perf_counter()
+        estimates = [localizer.push(frame) for frame in sequence]
+        seconds = time.perf_counter() - t0
     errors = position_errors([e.pose for e in estimates], sequence.poses)
     return {"scene": scene_name, "seed": seed, "errors": errors, "seconds": seconds,
             "statuses": [e.status for e in estimates]}

@@ -230,48 +230,38 @@ def test_scan_matching_keeps_the_map_sharp_under_drifting_odometry():
     assert tracked < 0.1  # (measured: 0.036 m)
 
 
-# --- the compiled observation (estimator.kernels: numba) -------------------------------------
-
-GRID_FIELDS = ("wall_points", "origin", "free", "clearance")
-
-
-def _observations(snapshot_of, overrides=()):
-    """The observation of the same grid with kernels numpy and numba (or the InputError both raise)."""
-    out = []
-    for kernels in ("numpy", "numba"):
-        settings = load_settings(overrides=[*overrides, f"estimator.kernels={kernels}"])
-        try:
-            out.append(snapshot_of(settings).observation(make_rng(0, "obs")))
-        except InputError as err:
-            out.append(err)
-    return out
+# --- the observation's grids ----------------------------------------------------------------
 
 
 def _assert_same_observation(a, b):
+    """Two observations (or the InputErrors both raised) equal bit for bit."""
     assert type(a) is type(b)
     if isinstance(a, InputError):
         assert str(a) == str(b)
         return
-    for name in GRID_FIELDS:  # bit for bit, dtype and shape included
+    for name in ("wall_points", "origin", "free", "clearance"):  # dtype and shape included
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), name
-    # the primitives: the compiled extractors' own tolerances (tests/test_*_numba.py)
-    assert np.array_equal(a.lines.support, b.lines.support)
-    np.testing.assert_allclose(b.lines.endpoints, a.lines.endpoints, rtol=0, atol=1e-12)
-    assert len(a.circles) == len(b.circles)
-    np.testing.assert_allclose(b.circles.centers, a.circles.centers, rtol=0, atol=1e-9)
+    for x, y in ((a.lines, b.lines), (a.circles, b.circles)):
+        for u, v in zip(x.__dict__.values(), y.__dict__.values()):
+            assert np.array_equal(u, v)
 
 
 @pytest.mark.parametrize("memory", [0, 3])
-def test_numba_observation_equals_numpy_on_random_grids(memory):
-    """Random grids whose values sit on the thresholds (float32 0.4 vs 0.4, hits at
-    exactly the wall ratio, seen stamps at the memory's edge) and whose known cells fill
-    a sub-rectangle (a crop with and without margins clipped at the grid's border)."""
-    pytest.importorskip("numba")
-    from zfloc_stream.frontend.bev import BevSnapshot
+def test_observation_grids_follow_the_thresholds_on_random_grids(memory):
+    """Random grids whose values sit on the thresholds (float32 0.4 vs 0.4, hits at exactly
+    the wall ratio, seen stamps at the memory's edge): the wall points are the cells that
+    pass bev.wall_cells (and were seen recently), the free mask the recent cells below
+    free_threshold, the clearance 0 off free cells and the distance to the nearest cell
+    not free elsewhere; the crop holds every known cell."""
+    from scipy import ndimage
+
+    from zfloc_stream.frontend.bev import BevSnapshot, wall_cells
 
     gen = np.random.default_rng(memory)
-    thresholds = ["bev.occupied_threshold=0.4", "bev.free_threshold=-0.3", "bev.wall_min_ratio=0.3"]
+    settings = load_settings(overrides=["bev.occupied_threshold=0.4", "bev.free_threshold=-0.3", "bev.wall_min_ratio=0.3",
+                                        f"bev.memory_frames={memory}"])
+    b = settings.bev
     raised = 0
     for trial in range(12):
         n = 80
@@ -289,29 +279,40 @@ def test_numba_observation_equals_numpy_on_random_grids(memory):
         stamp = 20
         seen = gen.integers(stamp - 5, stamp + 1, (n, n)).astype(np.int32)
         if trial == 1:
-            wall[:] = 0  # no wall cell: both raise
-
-        def snapshot_of(settings):
-            return BevSnapshot(logodds, wall, hits, seen, -7, 11, np.zeros((0, 3)), settings, stamp)
-
-        a, b = _observations(snapshot_of, [*thresholds, f"bev.memory_frames={memory}"])
-        assert trial != 1 or isinstance(a, InputError)
-        raised += isinstance(a, InputError)
-        _assert_same_observation(a, b)
+            wall[:] = 0  # no wall cell
+        snap = BevSnapshot(logodds, wall, hits, seen, -7, 11, np.zeros((0, 3)), settings, stamp)
+        recent = seen > stamp - memory if memory else np.ones((n, n), bool)
+        walls = wall_cells(wall, hits, logodds, b) & recent
+        try:
+            obs = snap.observation(make_rng(0, "obs"))
+        except InputError:
+            assert not walls.any()
+            raised += 1
+            continue
+        assert trial != 1
+        # the crop's origin in cells, and the grids on it
+        oc = np.rint(obs.origin / b.resolution).astype(int) - [-7, 11]
+        h, w = obs.free.shape
+        crop = (slice(oc[1], oc[1] + h), slice(oc[0], oc[0] + w))
+        known = ((logodds != 0) | (wall > 0)) & recent
+        assert known[crop].sum() == known.sum()  # every known cell inside the crop
+        free = (logodds[crop] < b.free_threshold) & recent[crop]
+        assert np.array_equal(obs.free, free)
+        rr, cc = np.nonzero(walls[crop])
+        assert np.array_equal(obs.wall_points, obs.origin + (np.stack([cc, rr], axis=1) + 0.5) * b.resolution)
+        occupied = ((logodds[crop] > b.occupied_threshold) | walls[crop]) & recent[crop]
+        expected = np.where(free, ndimage.distance_transform_edt(~occupied) * b.resolution, 0.0)
+        np.testing.assert_allclose(obs.clearance, expected, rtol=0, atol=1e-9)
     assert raised <= 3  # most grids give an observation
 
 
-def test_numba_observation_equals_numpy_on_fused_scans():
-    pytest.importorskip("numba")
-
-    def snapshot_of(settings):
-        bev = RollingBEV(settings)
-        rng = make_rng(5, "noise")
-        for i, (x, y) in enumerate([(2, 2), (3, 3), (5, 3), (7, 2.5)]):
-            bev.add(laser(x, y, 0.3 * i, noise=0.01, rng=rng, t=i))
-        return bev.snapshot()
-
-    for memory in (0, 2):
-        a, b = _observations(snapshot_of, [f"bev.memory_frames={memory}"])
-        assert len(a.wall_points) > 300 and len(a.lines) > 0
-        _assert_same_observation(a, b)
+def test_observation_of_fused_scans_is_repeatable():
+    settings = load_settings()
+    bev = RollingBEV(settings)
+    rng = make_rng(5, "noise")
+    for i, (x, y) in enumerate([(2, 2), (3, 3), (5, 3), (7, 2.5)]):
+        bev.add(laser(x, y, 0.3 * i, noise=0.01, rng=rng, t=i))
+    a = bev.snapshot().observation(make_rng(0, "obs"))
+    b = bev.snapshot(copy=False).observation(make_rng(0, "obs"))
+    assert len(a.wall_points) > 300 and len(a.lines) > 0
+    _assert_same_observation(a, b)

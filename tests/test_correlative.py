@@ -39,12 +39,15 @@ def test_float32_counts_round_to_the_exact_counts_everywhere():
     side = 2 * half
     spectrum, shape, _ = C._mask_spectrum(scene.floorplan, 0.25, 0.3 + 0.125, half)
     n_i, n_j = shape[0] - side + 1, shape[1] - side + 1
+    H, W, M = C._fast_grid(spectrum, side, n_i, n_j)
     for theta in np.deg2rad([0.0, 37.0, 180.0, 271.0]):
-        ij = C._angle_template(local, theta, 0.25, half)
+        ij = np.ascontiguousarray(C._angle_template(local, theta, 0.25, half))
         exact = C._exact_scores(spectrum, ij, n_i, n_j)
-        fast = C._fast_peaks(spectrum, ij, side, n_i, n_j, 10)
+        spec = C._forward(ij, side, H, W)
+        C._pair_products(spec, M, M, np.zeros((0, 0), np.complex64))
+        fast = C._peaks(spec, n_i, n_j, W, 10)
         assert fast is not None
-        best, counts, _ = fast
+        best, counts = fast
         assert np.array_equal(exact[best], counts) and len(best) == 10
         boundary = counts.min()
         assert (exact > boundary).sum() == (counts > boundary).sum()  # nothing above the boundary missed
@@ -56,17 +59,22 @@ def test_float32_counts_round_to_the_exact_counts_everywhere():
 
 
 @pytest.mark.parametrize("H, W", [(64, 48), (63, 50)])
-def test_a_templates_180_degree_turn_has_the_mirrored_transform(H, W):
+def test_a_templates_180_degree_turn_has_the_mirrored_spectrum(H, W):
     rng = np.random.default_rng(5)
     side = 20
     ij = rng.integers(0, side, size=(60, 2))
     turned = (side - 1) - ij
-    direct = C._template_spectrum(turned, side, H, W)
-    mirrored = C._mirrored_spectrum(C._template_spectrum(ij, side, H, W), C._mirror_phase(side, H, W))
+    M = (rng.normal(size=(H, W // 2 + 1)) + 1j * rng.normal(size=(H, W // 2 + 1))).astype(np.complex64)
+    empty = np.zeros((0, 0), np.complex64)
+    direct = C._forward(turned, side, H, W)
+    C._pair_products(direct, M, M, empty)  # the turned template's correlation spectrum
+    spec = C._forward(ij, side, H, W)
+    mirrored = np.empty_like(spec)
+    C._pair_products(spec, M, M * C._mirror_phase(side, H, W), mirrored)
     assert mirrored.shape == direct.shape
-    assert np.abs(mirrored - direct).max() < 1e-3 * len(ij)
-    # and it is not trivially so: the unturned template's transform is far from it
-    assert np.abs(C._template_spectrum(ij, side, H, W) - direct).max() > 1.0
+    assert np.abs(mirrored - direct).max() < 1e-3 * len(ij) * np.abs(M).max()
+    # and it is not trivially so: the unturned template's spectrum is far from it
+    assert np.abs(spec - direct).max() > 1.0
 
 
 def _segments(angles_deg, length=3.0, spacing=2.0):
@@ -120,50 +128,23 @@ def test_direction_histogram_is_continuous_across_bin_edges():
     assert np.isclose(below.sum(), 3.0)  # the length, shared between neighbouring bins
 
 
-# ---- the compiled path (estimator.kernels: numba) -------------------------------------
+# ---- the compiled per-angle search ---------------------------------------------------
 
 
-def _numba():
-    pytest.importorskip("numba")
-    from zfloc_stream.estimation import correlative_numba
-
-    return correlative_numba
-
-
-@pytest.mark.parametrize("scene_name,seed,n_frames", [("office", 0, 8), ("hall", 1, 10), ("symmetric", 2, 6)])
-@pytest.mark.parametrize("cell,step,peaks", [(0.25, 4.0, 10), (0.1, 2.0, 8), (0.25, 7.0, 6)])
-def test_numba_search_is_the_numpy_search_and_the_reference_bit_for_bit(scene_name, seed, n_frames, cell, step, peaks):
+@pytest.mark.parametrize("scene_name,seed,n_frames", [("office", 0, 8), ("symmetric", 2, 6)])
+def test_a_grid_without_180_degree_turns_is_the_reference_too(scene_name, seed, n_frames):
     """step 7: 360 / 7 is no whole number, so no angle has its 180-degree turn on the grid
-    (no mirrored spectra); the other steps pair every angle with its turn."""
-    _numba()
+    (no mirrored spectra); the other tests' steps pair every angle with its turn."""
     scene = build_scene(scene_name, seed=seed)
     points = _points(scene, n_frames, seed)
-    kw = dict(cell=cell, angle_step_deg=step, tolerance=0.3, peaks=peaks)
-    for scale in (1.0, 0.93):
-        compiled = C.correlative_models(scene.floorplan, points, scale, kernels="numba", **kw)
-        assert len(compiled) > 0
-        assert np.array_equal(compiled, C.correlative_models(scene.floorplan, points, scale, **kw))
-        assert np.array_equal(compiled, C.correlative_models_reference(scene.floorplan, points, scale, **kw))
+    kw = dict(cell=0.25, angle_step_deg=7.0, tolerance=0.3, peaks=6)
+    fast = C.correlative_models(scene.floorplan, points, **kw)
+    assert len(fast) > 0 and np.array_equal(fast, C.correlative_models_reference(scene.floorplan, points, **kw))
 
 
-def test_numba_search_with_angle_masks_is_the_numpy_search():
-    """Masks that keep an angle without its turn, a turn without its angle, both, or none."""
-    _numba()
-    scene = build_scene("symmetric", seed=2)
-    points = _points(scene, 6, 2)
-    kw = dict(cell=0.25, angle_step_deg=4.0, tolerance=0.3, peaks=10)
-    rng = np.random.default_rng(0)
-    masks = [np.zeros(90, dtype=bool), np.ones(90, dtype=bool)] + [rng.random(90) < p for p in (0.1, 0.3, 0.6)]
-    masks[0][[3, 50]] = True  # 12 degrees without 192, 200 without 20
-    for mask in masks:
-        compiled = C.correlative_models(scene.floorplan, points, angles=mask, kernels="numba", **kw)
-        assert np.array_equal(compiled, C.correlative_models(scene.floorplan, points, angles=mask, **kw))
-
-
-def test_numba_search_falls_back_to_the_exact_pass(monkeypatch):
+def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
     """No float32 count vouched for (slack < 0): every angle takes the float64 pass, and
     the models are still the reference's; so is a map too small to prune, and too few points."""
-    _numba()
     scene = build_scene("office", seed=0)
     points = _points(scene, 8, 0)
     kw = dict(cell=0.25, angle_step_deg=8.0, tolerance=0.3, peaks=10)
@@ -172,10 +153,10 @@ def test_numba_search_falls_back_to_the_exact_pass(monkeypatch):
     exact = C._exact_peaks
     monkeypatch.setattr(C, "_exact_peaks", lambda *a: calls.append(1) or exact(*a))
     monkeypatch.setattr(C, "_ROUNDING_SLACK", -1.0)
-    assert np.array_equal(C.correlative_models(scene.floorplan, points, kernels="numba", **kw), ref)
+    assert np.array_equal(C.correlative_models(scene.floorplan, points, **kw), ref)
     assert len(calls) == 45  # every angle
     monkeypatch.undo()
-    assert C.correlative_models(scene.floorplan, points[:2], kernels="numba", **kw).shape == (0, 4)
+    assert C.correlative_models(scene.floorplan, points[:2], **kw).shape == (0, 4)
     # a small room and many peaks: fewer rows of placements than peaks, the exact pass
     from zfloc_stream.floorplan import Floorplan
 
@@ -184,41 +165,11 @@ def test_numba_search_falls_back_to_the_exact_pass(monkeypatch):
     room = Floorplan.from_occupancy(occupied, 0.1, (0.0, 0.0))
     pts = np.array([[0.1, 0.1], [1.4, 0.1], [1.4, 1.4], [0.1, 1.4], [0.7, 0.1], [0.1, 0.8]])
     kw = dict(cell=0.25, angle_step_deg=30.0, tolerance=0.3, peaks=400)
-    compiled = C.correlative_models(room, pts, kernels="numba", **kw)
-    assert len(compiled) > 0 and np.array_equal(compiled, C.correlative_models_reference(room, pts, **kw))
+    found = C.correlative_models(room, pts, **kw)
+    assert len(found) > 0 and np.array_equal(found, C.correlative_models_reference(room, pts, **kw))
 
 
-def _tied_score(rng, n_i, width, n_j, levels, noise):
-    """A float32 correlation-like score: small integer counts with many ties, plus noise."""
-    score = rng.integers(0, levels, size=(n_i, width)).astype(np.float64)
-    score[:, n_j:] = levels + 5  # columns past n_j are not placements: never picked
-    return (score + rng.uniform(-noise, noise, size=score.shape)).astype(np.float32)
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_compiled_peak_picking_is_the_numpy_picking(seed):
-    """Ties by the dozen at the boundary count (spread evenly), few candidates, one
-    placement per row, a rounding check that passes or fails, per_angle 1 and many."""
-    CN = _numba()
-    rng = np.random.default_rng(seed)
-    n_i, n_j = int(rng.integers(1, 60)), int(rng.integers(1, 70))
-    width = n_j + int(rng.integers(0, 9))
-    levels = int(rng.choice([2, 3, 8, 50]))
-    noise = float(rng.choice([0.0, 1e-4, 0.2, 0.3]))
-    score = _tied_score(rng, n_i, width, n_j, levels, noise)
-    for per_angle in sorted({1, 2, 7, int(rng.integers(1, 40))}):
-        if n_i < per_angle or n_i * n_j <= per_angle:
-            continue  # the caller takes the exact pass
-        want = C._pick_peaks(score[:, :n_j], per_angle)
-        best, counts, ok = CN._pick(score, n_j, per_angle, C._ROUNDING_SLACK)
-        assert ok == (want is not None)
-        if ok:
-            assert best.dtype == want[0].dtype and counts.dtype == want[1].dtype
-            assert np.array_equal(best, want[0]) and np.array_equal(counts, want[1])
-
-
-def test_compiled_peak_picking_spreads_ties_like_linspace():
-    CN = _numba()
+def test_peak_picking_spreads_ties_like_linspace():
     for n_tied in (2, 3, 5, 17, 100, 1001):
         for per_angle in (1, 2, 3, 4, 9, 16):
             score = np.zeros((n_tied + 3, 1), np.float32)
@@ -226,30 +177,25 @@ def test_compiled_peak_picking_spreads_ties_like_linspace():
             score[3:, 0] = 2.0
             if per_angle > n_tied + 3 or per_angle <= 3:
                 continue
-            best, counts, ok = CN._pick(score, 1, per_angle, 0.25)
-            want = C._pick_peaks(score, per_angle)
-            assert ok and np.array_equal(best, want[0]) and np.array_equal(counts, want[1])
+            best, counts, ok = C._pick(score, 1, per_angle, 0.25)
             spread = 3 + np.round(np.linspace(0, n_tied - 1, per_angle - 3)).astype(np.int64)
-            assert np.array_equal(best, np.concatenate([[0, 1, 2], spread]))
+            assert ok and np.array_equal(best, np.concatenate([[0, 1, 2], spread]))
+            assert np.array_equal(counts, np.where(best < 3, 5.0, 2.0))
 
 
-def test_compiled_peak_picking_refuses_what_it_cannot_vouch_for():
-    CN = _numba()
+def test_peak_picking_refuses_what_it_cannot_vouch_for():
     score = np.zeros((20, 30), np.float32)
     score[4, 7] = 9.0
     score[11, 2] = 8.0
     score[15, 29] = 8.0
-    assert CN._pick(score, 30, 3, 0.25)[2]
-    assert np.array_equal(CN._pick(score, 30, 3, 0.25)[0], [4 * 30 + 7, 11 * 30 + 2, 15 * 30 + 29])
+    assert C._pick(score, 30, 3, 0.25)[2]
+    assert np.array_equal(C._pick(score, 30, 3, 0.25)[0], [4 * 30 + 7, 11 * 30 + 2, 15 * 30 + 29])
     off = score.copy()
     off[11, 2] = 8.3  # a candidate 0.3 off its integer
-    assert not CN._pick(off, 30, 3, 0.25)[2] and C._pick_peaks(off, 3) is None
+    assert not C._pick(off, 30, 3, 0.25)[2]
     for bad in (np.nan, np.inf, -np.inf):
         broken = score.copy()
         broken[17, 5] = bad  # not a candidate, but the pass cannot be trusted
-        assert not CN._pick(broken, 30, 3, 0.25)[2]
-    assert CN._pick(score, 30, 3, 0.25)[2]
-    narrow = score[:, :8]  # the columns past n_j are ignored, not read as placements
-    best, counts, ok = CN._pick(score, 8, 2, 0.25)
-    want = C._pick_peaks(np.ascontiguousarray(narrow), 2)
-    assert ok and np.array_equal(best, want[0]) and np.array_equal(counts, want[1])
+        assert not C._pick(broken, 30, 3, 0.25)[2]
+    best, counts, ok = C._pick(score, 8, 2, 0.25)  # the columns past n_j are ignored, not read as placements
+    assert ok and np.array_equal(best, [4 * 8 + 7, 11 * 8 + 2]) and np.array_equal(counts, [9.0, 8.0])

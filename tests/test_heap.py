@@ -45,7 +45,7 @@ def test_every_round_releases_the_heap_unless_told_not_to(monkeypatch, release):
     calls = []
     monkeypatch.setattr(localizer_module, "release_free_heap", lambda: calls.append(1) or True)
     scene = build_scene("rooms", seed=0)
-    settings = load_settings(overrides=[f"localizer.release_memory={str(release).lower()}"])
+    settings = load_settings(overrides=[f"localizer.release_memory={str(release).lower()}", "localizer.pipeline=inline"])
     loc = localizer_module.Localizer(scene.floorplan, settings)
     rounds = sum("primitives" in loc.push(f).timings for f in simulate(scene, SimSettings(), seed=0, n_frames=12))
     assert rounds >= 2

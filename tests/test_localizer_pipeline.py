@@ -72,7 +72,7 @@ def test_a_worker_process_gives_the_same_bits(laser):
 def test_a_round_lands_exactly_at_its_join_frame(laser):
     floorplan, frames = laser
     k, delay = 5, 3
-    inline = _run(floorplan, frames, _settings())
+    inline = _run(floorplan, frames, _settings("localizer.pipeline=inline"))
     piped = _run(floorplan, frames, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}"))
     starts = [i for i in range(len(frames)) if (i + 1) % k == 0]
     assert [i for i, e in enumerate(inline) if "model_estimation" in e.timings] == starts  # inline: in the starting push
@@ -86,8 +86,8 @@ def test_a_round_lands_exactly_at_its_join_frame(laser):
 
 def test_inline_ignores_join_delay(laser):
     floorplan, frames = laser
-    a = _run(floorplan, frames[:12], _settings())
-    b = _run(floorplan, frames[:12], _settings("localizer.join_delay=3"))
+    a = _run(floorplan, frames[:12], _settings("localizer.pipeline=inline"))
+    b = _run(floorplan, frames[:12], _settings("localizer.pipeline=inline", "localizer.join_delay=3"))
     assert [_bits(e) for e in a] == [_bits(e) for e in b]
 
 
@@ -157,3 +157,36 @@ def test_run_and_replay_cli_agree_on_a_pipelined_session(laser, tmp_path, capsys
     args = ["run", "--floorplan", str(plan), "--input", str(source), "--out", str(out), "--set", "localizer.pipeline=pipelined", "--no-progress"]
     assert cli.main(args + ["--set", "estimator.scale_mode=fixed"]) == 0
     assert replay_cli.main([str(Path(out) / "session.mcap"), "--exact"]) == 0
+
+
+def test_online_gives_the_first_fix_inline_then_joins_later(laser):
+    """online (the default): the rounds before the first pose run inline, so the first fix
+    lands at the same frame and with the same bits as inline; from then on each round
+    lands round_delay frames after its start, on the worker."""
+    floorplan, frames = laser
+    k = 5
+    inline = _run(floorplan, frames, _settings("localizer.pipeline=inline"))
+    online = _run(floorplan, frames, _settings())
+    assert _settings().localizer.pipeline == "online"
+    first = next(i for i, e in enumerate(inline) if e.pose is not None)
+    assert next(i for i, e in enumerate(online) if e.pose is not None) == first
+    assert [_bits(e) for e in online[: first + 1]] == [_bits(e) for e in inline[: first + 1]]
+    later = [i for i in range(first + 1, len(frames)) if (i + 1) % k == 0]
+    assert later and all("round_start" in online[i].timings for i in later)
+    assert all("round_wait" in online[i + k].timings for i in later if i + k < len(frames))
+    assert all(e.pose is not None for e in online[first:])
+
+
+def test_online_replays_bit_for_bit_on_a_thread_or_a_process(laser):
+    floorplan, frames = laser
+    a = _run(floorplan, frames, _settings("localizer.pipeline=online"))
+    b = _run(floorplan, frames, _settings("localizer.pipeline=online", "localizer.worker=process"))
+    assert [_bits(e) for e in a] == [_bits(e) for e in b]
+
+
+def test_studies_run_rounds_inline_unless_told_otherwise():
+    from zfloc_stream.study import cell_settings
+
+    assert cell_settings({}, seed=3).localizer.pipeline == "inline"
+    assert cell_settings({"localizer": {"pipeline": "online"}}, seed=3).localizer.pipeline == "online"
+    assert cell_settings({}, 3, {"estimator": {"scale_mode": "fixed"}}).localizer.pipeline == "inline"

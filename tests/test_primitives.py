@@ -4,13 +4,8 @@ import pytest
 from zfloc_stream.config import CircleSettings, LineSettings
 from zfloc_stream.errors import InputError
 from zfloc_stream.geometry import LineSet
-from zfloc_stream.primitives import (
-    angular_coverage_and_span,
-    deduplicate_lines,
-    extract_circles,
-    extract_lines,
-    grid_subsample,
-)
+from zfloc_stream.circle_fitting import angular_coverage_and_span
+from zfloc_stream.primitives import deduplicate_lines, extract_circles, extract_lines, grid_subsample
 from zfloc_stream.rng import make_rng
 
 LINES = LineSettings()
@@ -245,3 +240,51 @@ def test_no_circle_on_walls_corners_and_rooms_over_100_trials():
 def test_circle_empty_input():
     assert len(extract_circles(np.zeros((0, 2)), CIRCLES, make_rng(0))) == 0
     assert len(extract_circles(np.zeros((5, 2)), CIRCLES, make_rng(0))) == 0
+
+
+# --- degenerate inputs of the compiled line extraction -----------------------------------
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 7])
+def test_too_few_points_give_no_line(n):
+    lines = extract_lines(np.random.default_rng(3).uniform(0, 5, (n, 2)), LINES, np.random.default_rng(0))
+    assert len(lines) == 0 and lines.normals.shape == (0, 2) and lines.endpoints.shape == (0, 2, 2)
+
+
+def test_exactly_collinear_points_and_an_axis_aligned_line():
+    gen = np.random.default_rng(5)
+    x = np.sort(gen.uniform(0, 6, 300))
+    line = np.stack([x, 0.5 * x + 1.0], axis=1)  # exactly collinear, with a gap wider than `gap`
+    line = line[(x < 2.0) | (x > 2.5)]
+    lines = extract_lines(line, LINES, np.random.default_rng(2))
+    assert len(lines) == 2
+    assert np.allclose(np.abs(lines.normals @ [-0.5, 1.0]) / np.hypot(0.5, 1.0), 1.0, atol=1e-9)
+    axis = np.stack([x, np.zeros_like(x)], axis=1)  # on a coordinate axis: degenerate covariance
+    lines = extract_lines(axis, LINES, np.random.default_rng(2))
+    assert len(lines) == 1 and np.allclose(np.abs(lines.normals[0]), [0.0, 1.0]) and abs(lines.offsets[0]) < 1e-12
+
+
+def test_sparse_noise_gives_no_line():
+    pts = np.random.default_rng(9).uniform(0, 30, (200, 2))  # no seed has neighbours
+    assert len(extract_lines(pts, LINES, np.random.default_rng(1))) == 0
+
+
+def test_lines_are_bit_for_bit_repeatable_and_take_one_permutation():
+    rng_points = np.random.default_rng(4)
+    pts = sample_segments([((0, 0), (6, 0)), ((6, 0), (6, 4)), ((0, 4), (6, 4))], rng_points)
+    a_rng, b_rng = np.random.default_rng(8), np.random.default_rng(8)
+    a, b = extract_lines(pts, LINES, a_rng), extract_lines(pts, LINES, b_rng)
+    for name in ("normals", "offsets", "endpoints", "support"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    c_rng = np.random.default_rng(8)
+    c_rng.permutation(len(pts))
+    assert a_rng.random() == c_rng.random()  # the seed order is the only draw
+
+
+def test_no_circle_in_degenerate_or_too_wide_input():
+    for pts in (np.zeros((0, 2)), np.zeros((5, 2)), np.zeros((30, 2)), np.ones((12, 2))):
+        assert len(extract_circles(pts, CIRCLES, np.random.default_rng(0))) == 0
+    long_wall = np.stack([np.arange(100) * 0.05, np.random.default_rng(3).normal(0, 0.01, 100)], axis=1)  # wider than a pillar
+    assert len(extract_circles(long_wall, CIRCLES, np.random.default_rng(1))) == 0
+    collinear = np.stack([np.arange(20) * 0.05, np.zeros(20)], axis=1)  # every triplet degenerate
+    assert len(extract_circles(collinear, CIRCLES, np.random.default_rng(2))) == 0

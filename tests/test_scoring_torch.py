@@ -1,4 +1,4 @@
-"""scoring.backend torch: the same scores as the numpy kernels (bit for bit on CPU, within one
+"""scoring.backend torch: the same scores as the compiled kernels (bit for bit on CPU, within one
 point per hypothesis on a GPU), the same localization, and one clear error without torch."""
 
 import sys
@@ -96,3 +96,13 @@ def test_a_bad_scoring_device_is_one_clear_error(world):
     fp, _, _ = world
     with pytest.raises(BackboneError, match="scoring.device 'gpu0' is not a device"):
         scoring_kernels(fp, ScoringSettings(backend="torch", device="gpu0"))
+
+
+def test_the_scorer_backend_is_chosen_when_the_localizer_is_built(world, monkeypatch):
+    from zfloc_stream.localizer import Localizer
+
+    fp, _, _ = world
+    monkeypatch.setattr(floorplan_scorer(fp, ScoringSettings()), "_torch_kernels", {})
+    monkeypatch.setitem(sys.modules, "torch", None)
+    with pytest.raises(BackboneError, match=r"scoring.backend torch needs the optional \[torch\] extra"):
+        Localizer(fp, load_settings(overrides=["estimator.scoring.backend=torch"]))

@@ -233,29 +233,3 @@ def test_2l_is_deterministic_given_the_generator():
     b = solve_2l(np.repeat(n[None], 50, 0), np.repeat(d[None], 50, 0), np.repeat(m[None], 50, 0), np.repeat(e[None], 50, 0), 1.0, np.random.default_rng(9))
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     assert np.unique(a[0][:, 3]).size > 10  # the scale really is perturbed per sample
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_indexed_3l_is_solve_3l_on_the_gathered_lines_bit_for_bit(seed):
-    """The estimator's 3L path (line indices, per-pair rotation tables, normal test on
-    single components) gives exactly what solve_3l gives on the gathered arrays."""
-    from zfloc_stream.estimation.solvers import _angle, solve_3l_indexed
-    from zfloc_stream.geometry import LineSet
-
-    rng = np.random.default_rng(seed)
-
-    def lines(n):
-        a = rng.uniform(-np.pi, np.pi, n)
-        a[n // 2 :] = np.round(a[n // 2 :] / (np.pi / 2)) * (np.pi / 2) + rng.normal(0, 0.02, n - n // 2)  # near-Manhattan
-        normals = np.column_stack([np.cos(a), np.sin(a)])
-        return LineSet(normals, rng.normal(0, 8, n), np.zeros((n, 2, 2)))
-
-    bev, fp = lines(25), lines(200)
-    K = 50000
-    b = rng.integers(0, len(bev.normals), (K, 3))
-    f = rng.integers(0, len(fp.normals), (K, 3))
-    for mode, cfg in (("free", SolverSettings()), ("prior", SolverSettings(min_scale=0.85, max_scale=1.15))):
-        ref = solve_3l(bev.normals[b], bev.offsets[b], fp.normals[f], fp.offsets[f], cfg, mode)
-        got = solve_3l_indexed(bev, fp, b, f, _angle(bev.normals), _angle(fp.normals), cfg)
-        assert len(ref[0]) > 100
-        assert np.array_equal(ref[0], got[0]) and np.array_equal(ref[1], got[1])

@@ -5,16 +5,14 @@ import threading
 
 import numpy as np
 import pytest
-from test_bev import _assert_same_observation
 from test_localizer_pipeline import _bits, _run, _settings
-from test_ransac_numba import _assert_same_bits, _estimator, _scene
+from test_draws import _assert_same_bits, _estimator, _scene
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream.estimation import correlative_numba, ransac, refine_numba, scoring_numba, solvers_numba
+from zfloc_stream.estimation import correlative, ransac, refine, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
-pytest.importorskip("numba")
 
 
 def test_run_keeps_the_order_and_uses_several_threads():
@@ -77,10 +75,10 @@ def test_bad_thread_count_is_a_config_error():
 @pytest.fixture
 def split_everything(monkeypatch):
     """Every kernel call splits, however small (the real minima keep tests' small inputs whole)."""
-    monkeypatch.setattr(scoring_numba, "_MIN_LOOKUPS_PER_THREAD", 1)
-    monkeypatch.setattr(scoring_numba, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
-    monkeypatch.setattr(refine_numba, "_MIN_MODELS_PER_THREAD", 1)
-    monkeypatch.setattr(solvers_numba, "_MIN_DRAWS_PER_THREAD", 1)
+    monkeypatch.setattr(scoring, "_MIN_LOOKUPS_PER_THREAD", 1)
+    monkeypatch.setattr(scoring, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(refine, "_MIN_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(solvers, "_MIN_DRAWS_PER_THREAD", 1)
     split = []
     run = threads.run
 
@@ -89,7 +87,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring_numba, refine_numba, solvers_numba, correlative_numba):
+    for module in (scoring, refine, solvers, correlative):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 
@@ -98,7 +96,7 @@ def split_everything(monkeypatch):
 @pytest.mark.parametrize("mode", ["free", "prior"])
 def test_3l_draws_in_pieces_are_the_whole(split_everything, seed, mode):
     bev, fp = _scene(seed)
-    cfg = _estimator(mode, "numba", 0.5)
+    cfg = _estimator(mode, 0.5)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
     whole = ransac._models_3l(bev, fp, 700, cfg, a)
     with threads.limit(7):  # pieces start in the middle of a query's draws
@@ -117,9 +115,9 @@ def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, c
     else:
         scene = build_scene("apartment", seed=2)
         frames = list(simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=30))
-    one = _run(scene.floorplan, frames, _settings("estimator.kernels=numba", "estimator.threads=1"))
+    one = _run(scene.floorplan, frames, _settings("estimator.threads=1"))
     assert not split_everything
-    three = _run(scene.floorplan, frames, _settings("estimator.kernels=numba", "estimator.threads=3"))
+    three = _run(scene.floorplan, frames, _settings("estimator.threads=3"))
     assert [_bits(e) for e in three] == [_bits(e) for e in one]
     assert one[-1].pose is not None
     wanted = {"piece", "search_pair", "<lambda>"}
@@ -130,11 +128,11 @@ def test_observation_jobs_on_threads_give_the_serial_observation():
     """The BEV observation's clustering, line extraction and clearance run side by side;
     the circle fits draw after the lines: the same observation (a pillar included)."""
     from zfloc_stream.config import load_settings
-    from zfloc_stream.frontend.bev import BevSnapshot, RollingBEV
+    from zfloc_stream.frontend.bev import RollingBEV
     from zfloc_stream.rng import make_rng
 
     scene = build_scene("office", seed=0)
-    bev = RollingBEV(load_settings(overrides=["estimator.kernels=numba"]))
+    bev = RollingBEV(load_settings())
     for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:  # passes a pillar
         bev.add(frame)
     snapshot = bev.snapshot()
@@ -147,8 +145,4 @@ def test_observation_jobs_on_threads_give_the_serial_observation():
     for a, b in ((side_by_side.lines, serial.lines), (side_by_side.circles, serial.circles)):
         for x, y in zip(a.__dict__.values(), b.__dict__.values()):
             assert np.array_equal(x, y)
-    # and the numpy path's (lines, then circles, from one random stream)
-    s = snapshot
-    numpy_snapshot = BevSnapshot(s.logodds, s.wall, s.hits, s.seen, s.ix0, s.iy0, s.trajectory,
-                                 load_settings(overrides=["estimator.kernels=numpy"]), s.stamp)
-    _assert_same_observation(numpy_snapshot.observation(make_rng(0, "obs")), serial)
+

@@ -1,15 +1,29 @@
-"""zfloc-stream: online zero-shot floorplan localization."""
+"""zfloc-stream: online zero-shot floorplan localization.
 
-from .config import Settings, load_settings
-from .errors import ZflocError
-from .estimate import Alternative, Estimate
-from .floorplan import Floorplan
-from .frames import CameraFrame, LaserFrame
-from .localizer import Localizer
-from .sim2 import Sim2
+The public names are imported on first use (PEP 562), so a command line that only parses
+its arguments (`zfloc-stream --help`, a usage error) never imports scipy, scikit-learn or
+numba.
+"""
 
-__all__ = [
-    "Alternative", "CameraFrame", "Estimate", "Floorplan", "LaserFrame", "Localizer", "Settings", "Sim2",
-    "ZflocError", "load_settings",
-]
+from importlib import import_module
+
+_PUBLIC = {
+    "Settings": ".config", "load_settings": ".config", "ZflocError": ".errors", "Alternative": ".estimate",
+    "Estimate": ".estimate", "Floorplan": ".floorplan", "CameraFrame": ".frames", "LaserFrame": ".frames",
+    "Localizer": ".localizer", "Sim2": ".sim2", "load_floorplan": ".plan_loading",
+}
+
+__all__ = sorted(_PUBLIC)
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'zfloc_stream' has no attribute {name!r}")
+    value = getattr(import_module(_PUBLIC[name], __name__), name)
+    globals()[name] = value  # once: later lookups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import re
 import sys
 import typing
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -237,6 +238,18 @@ class CorrelativeSettings(Section):
 
 
 class EstimatorSettings(Section):
+    # The hot loops of a round are compiled (numba) and have one implementation each, so
+    # the former estimator.kernels (numpy | numba) chooses nothing: older configs and
+    # session files that name it still load, with a FutureWarning, and it is dropped.
+    @model_validator(mode="before")
+    @classmethod
+    def _drop_kernels(cls, data):
+        if isinstance(data, dict) and "kernels" in data:
+            data = {k: v for k, v in data.items() if k != "kernels"}
+            warnings.warn("estimator.kernels is ignored: the compiled kernels are the only implementation "
+                          "(remove it from the config)", FutureWarning, stacklevel=2)
+        return data
+
     # prior: metric input (depth camera, VIO, depth network) known to about prior_range;
     # fixed: exactly metric (a laser; sources that know set it); free: any scale in
     # [min_scale, max_scale] (the paper's setting, on request).
@@ -247,16 +260,11 @@ class EstimatorSettings(Section):
     scoring: ScoringSettings = ScoringSettings()
     refine: RefineSettings = RefineSettings()
     ransac: RansacSettings = RansacSettings()
-    # Hot loops (coarse/full scoring, the 3L solver, the LM refinement) in plain numpy, or
-    # compiled with numba (the optional [fast] extra, zfloc_stream/numba_support.py): the
-    # same decisions within the cross-machine tolerance (estimation/*_numba.py say which
-    # kernels are bit for bit), several times faster.
-    kernels: Literal["numpy", "numba"] = "numpy"
     # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this
     # process may use (at most threads.AUTO_MAX), less one for the stream when the round
-    # runs beside it (localizer.pipeline: pipelined).
+    # runs on the worker beside it (localizer.pipeline: online once a pose exists, pipelined).
     threads: int = Field(0, ge=0, le=256)
 
 
@@ -444,13 +452,16 @@ class LocalizerSettings(Section):
     # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
     # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
     release_memory: bool = True
-    # Where a round runs (localizer.py). inline: inside the push of the frame that starts
-    # it, applied at once (the reference: every published number and recorded session).
-    # pipelined: on one worker beside the stream, applied exactly join_delay frames later
-    # (push blocks there if the worker is late), so push costs about one fusion. delayed:
-    # computed inline but applied join_delay frames later: bit for bit what pipelined gives,
-    # without a worker (studies, tests).
-    pipeline: Literal["inline", "pipelined", "delayed"] = "inline"
+    # Where a round runs (localizer.py). online (default, the Localizer API and `run`): a
+    # round runs inline while no pose exists (the first pose lands at the frame whose round
+    # finds it, as inline gives it) and, once there is a pose, on one worker beside the
+    # stream, applied exactly join_delay frames later; whether a round is inline is decided
+    # by the state at its start frame, so a run replays bit for bit. inline: inside the push
+    # of the frame that starts it, applied at once (studies: offline, no latency to hide).
+    # pipelined: every round on the worker, applied join_delay frames later (push blocks
+    # there if the worker is late), so push costs about one fusion. delayed: computed inline
+    # but applied join_delay frames later: bit for bit what pipelined gives, without a worker.
+    pipeline: Literal["online", "inline", "pipelined", "delayed"] = "online"
     join_delay: int = Field(0, ge=0, le=10_000)  # frames from a round's start to its result (pipelined / delayed); 0 = every_k_frames
     worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
 
@@ -458,7 +469,8 @@ class LocalizerSettings(Section):
 
     @property
     def round_delay(self) -> int:
-        """Frames between the start of a round and the frame its result is applied at."""
+        """Frames between the start of a round and the frame its result is applied at (online:
+        of the rounds that start once a pose exists; the others are inline)."""
         if self.pipeline == "inline":
             return 0
         return self.join_delay or self.every_k_frames

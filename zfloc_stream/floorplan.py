@@ -26,13 +26,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import yaml
-from scipy import ndimage
 
 from .config import Settings
 from .documents import TooDeep, load_yaml, real_number
 from .errors import FloorplanError, InputError
-from .geometry import CircleSet, LineSet
-from .primitives import as_points, deduplicate_lines, extract_circles, extract_lines, grid_subsample
+from .geometry import CircleSet, LineSet, as_points, grid_subsample
 from .rng import make_rng
 
 ROS_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -286,6 +284,8 @@ class Floorplan:
         self.wall_points = self.cell_to_world(rows, cols)
         # Wall faces: wall cells next to a non-wall cell. The BEV sees wall surfaces, so the
         # floorplan's lines and circles are extracted from faces, not thick wall interiors.
+        from scipy import ndimage  # here: ~0.25 s that a CLI error must not pay
+
         interior = ndimage.binary_erosion(self.occupied, border_value=1)
         frows, fcols = np.nonzero(self.occupied & ~interior)
         self.face_points = self.cell_to_world(frows, fcols)
@@ -477,12 +477,18 @@ class Floorplan:
     @cached_property
     def lines(self) -> LineSet:
         cfg = self.settings
+        from .primitives import deduplicate_lines, extract_lines  # compiled (numba): imported when first needed
+
         pts = grid_subsample(self.face_points, cfg.floorplan.line_point_spacing)
-        raw = extract_lines(pts, cfg.primitives.lines, make_rng(cfg.seed, "floorplan-lines"), kernels=cfg.estimator.kernels)
+        raw = extract_lines(pts, cfg.primitives.lines, make_rng(cfg.seed, "floorplan-lines"))
         return deduplicate_lines(raw, cfg.primitives.lines)
 
     @cached_property
     def circles(self) -> CircleSet:
+        from scipy import ndimage
+
+        from .primitives import extract_circles  # compiled (numba): imported when first needed
+
         cfg = self.settings
         # Only isolated wall blobs (no wider than a pillar) can be pillars in a floorplan.
         labels, span = blob_spans(self.occupied)
@@ -494,7 +500,7 @@ class Floorplan:
         blob = small[labels[rows, cols]]
         if not blob.any():
             return CircleSet.empty()
-        return extract_circles(self.face_points[blob], cfg.primitives.circles, make_rng(cfg.seed, "floorplan-circles"), kernels=cfg.estimator.kernels)
+        return extract_circles(self.face_points[blob], cfg.primitives.circles, make_rng(cfg.seed, "floorplan-circles"))
 
     @cached_property
     def line_neighbour_matrix(self) -> np.ndarray:

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import InputError
+
 
 @dataclass(frozen=True)
 class LineSet:
@@ -61,3 +63,60 @@ class CircleSet:
 
     def subset(self, index) -> CircleSet:
         return CircleSet(self.centers[index], self.radii[index])
+
+
+def as_points(points, name: str = "points") -> np.ndarray:
+    """(N, 2) float array of finite points, or InputError naming what is wrong."""
+    try:
+        p = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an (N, 2) array of numbers") from None
+    if p.size == 0:
+        return np.zeros((0, 2))
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise InputError(f"{name} must have shape (N, 2), got {p.shape}")
+    if not np.isfinite(p).all():
+        raise InputError(f"{name} contain NaN or inf")
+    return p
+
+
+def grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Keep the first point of each spacing x spacing cell (deterministic, order-preserving)."""
+    if len(points) == 0 or spacing <= 0:
+        return points
+    cells = np.floor(points / spacing).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def deduplicate_lines(lines: LineSet, settings) -> LineSet:
+    """Drop lines that repeat a longer one (settings: config.LineSettings): nearly parallel
+    (< dedup_angle_deg), nearly the same offset (the shorter one's midpoint within
+    dedup_offset of the longer line) and overlapping extents. Order (longest first) is kept."""
+    m = len(lines)
+    if m < 2:
+        return lines
+    order = np.argsort(-lines.lengths, kind="stable")
+    L = lines.subset(order)
+    d = L.endpoints[:, 1] - L.endpoints[:, 0]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    cos = np.abs(d @ d.T)
+    parallel = cos >= np.cos(np.deg2rad(settings.dedup_angle_deg))
+    mid = L.midpoints
+    # offset[i, j]: distance of j's midpoint to line i
+    offset = np.abs(mid @ L.normals.T + L.offsets[None, :]).T
+    close = offset < settings.dedup_offset
+    # extents of j projected on i's direction overlap i's extent
+    t_i0 = np.einsum("ij,ij->i", L.endpoints[:, 0], d)
+    t_i1 = np.einsum("ij,ij->i", L.endpoints[:, 1], d)
+    pj0 = L.endpoints[:, 0] @ d.T  # [j, i]
+    pj1 = L.endpoints[:, 1] @ d.T
+    lo_j, hi_j = np.minimum(pj0, pj1).T, np.maximum(pj0, pj1).T  # [i, j]
+    lo_i, hi_i = np.minimum(t_i0, t_i1)[:, None], np.maximum(t_i0, t_i1)[:, None]
+    overlap = (np.minimum(hi_i, hi_j) - np.maximum(lo_i, lo_j)) > 0
+    dup = np.triu(parallel & close & overlap, 1)  # i suppresses only later (shorter) j
+    keep = np.ones(m, dtype=bool)
+    for i in np.flatnonzero(dup.any(axis=1)):  # greedy from the longest: a kept line suppresses its shorter repeats
+        if keep[i]:
+            keep &= ~dup[i]
+    return L.subset(np.flatnonzero(keep))

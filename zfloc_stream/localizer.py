@@ -13,9 +13,11 @@ current best alignment applied to the frame's odometry-plane pose, so every fram
 Where the round runs (localizer.pipeline): inline, inside the push of the frame i that
 starts it and applied there; or pipelined, on one worker beside the stream and applied at
 frame i + round_delay exactly (that push waits if the worker is late), never "when it is
-ready", so a run is deterministic. A round works on what it saw at frame i: a copy of the
-BEV grid, the tracker's warm starts and search mode, its rng (seeded by i), and at the
-join the tracker is updated with frame i's sensor position and index. `delayed` computes
+ready", so a run is deterministic. online (the default) is inline while no pose exists and
+nothing is pending (the first fix lands as early as inline gives it) and pipelined after.
+A round works on what it saw at frame i: a copy of the BEV grid, the tracker's warm starts
+and search mode, its rng (seeded by i), and at the join the tracker is updated with frame
+i's sensor position and index. `delayed` computes
 the round inline at frame i and applies it at the same join frame: bit for bit the
 pipelined results without a worker. close() (or leaving the `with`) stops the worker;
 rounds whose join frame no frame reached are dropped: the last estimate stays the last
@@ -40,10 +42,9 @@ from .estimate import Alternative, Estimate
 from .estimation import localize
 from .estimation.ransac import LocalizationResult, alignment_of, model_rows
 from .estimation.refine import refine_batch
-from .estimation.scoring import floorplan_scorer
+from .estimation.scoring import floorplan_scorer, scoring_kernels
 from .floorplan import Floorplan
 from .heap import release_free_heap
-from .numba_support import check_kernels
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import BevSnapshot, RollingBEV
 from .observation import BevObservation
@@ -73,12 +74,11 @@ class RoundOutcome:
     tracked: bool = False  # the round followed a confidently tracked mode (no global search)
 
 
-def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
+def run_round(floorplan, settings: Settings, job: RoundJob, beside_stream: bool = False) -> RoundOutcome:
     """Primitives + estimation of one round: a pure function of its inputs, so it gives the
     same bits on the caller's thread, a worker thread or a worker process. Afterwards the
-    round's freed temporaries go back to the OS (localizer.release_memory)."""
-    # estimator.threads' auto leaves the stream's core alone when the round runs beside it
-    beside_stream = settings.localizer.pipeline == "pipelined"
+    round's freed temporaries go back to the OS (localizer.release_memory). beside_stream:
+    the round runs on a worker (estimator.threads' auto leaves the stream's core alone)."""
     with threads.limit(threads.resolve(settings.estimator.threads, beside_stream=beside_stream)):
         out = _run_round(floorplan, settings, job)
     if settings.localizer.release_memory:
@@ -139,7 +139,7 @@ def _init_process(floorplan, settings: Settings) -> None:
 
 
 def _process_round(job: RoundJob) -> RoundOutcome:
-    return run_round(*_PROCESS_STATE, job)
+    return run_round(*_PROCESS_STATE, job, beside_stream=True)
 
 
 @dataclass
@@ -157,13 +157,12 @@ class Localizer:
         settings.backbones when the first such frame arrives (a replay of a session whose
         frames carry depth never loads them)."""
         self.settings = settings or Settings()
-        check_kernels(self.settings.estimator.kernels)  # numba asked for but missing: one line now, not at the first round
-        if self.settings.estimator.scoring.backend == "torch":  # likewise torch: else every round is skipped, no pose ever
-            from .backbones.base import require_torch
-
-            require_torch("estimator.scoring.backend: torch")
         self.perception = perception
         self.floorplan = floorplan
+        # the scorer backend (scoring.backend: the compiled FloorplanScorer or torch's) is
+        # chosen and built once, here: a missing [torch] extra or a bad device is one error
+        # now, not at the first round; rounds find it in the per-floorplan cache
+        scoring_kernels(floorplan, self.settings.estimator.scoring)
         self.bev = RollingBEV(self.settings)
         self.tracker = HypothesisTracker(self.settings.tracking)
         self.frames_pushed = 0
@@ -180,7 +179,7 @@ class Localizer:
         self._local: tuple[int, Sim2] | None = None  # (mode id, its alignment refined on the recent hits)
         self._local_frame = 0  # frames_fused at the last local refinement
         lc = self.settings.localizer
-        if lc.pipeline == "pipelined" and lc.worker == "process":
+        if lc.pipeline in ("pipelined", "online") and lc.worker == "process":
             self._executor().submit(int)  # start the process now: it takes a second or two to import
 
     # ------------------------------------------------------------------------------
@@ -259,14 +258,19 @@ class Localizer:
         """Fix what the round at frame `index` sees and run it (inline) or hand it over.
         A BEV with too little evidence skips the round when it is applied: the status
         stays as it is (initializing at first)."""
-        mode = self.settings.localizer.pipeline
+        lc = self.settings.localizer
+        mode = lc.pipeline
+        if mode == "online":
+            # no pose yet: the round is the user's first fix, it lands in this push; later
+            # ones go to the worker. Decided by this frame's state, so a replay decides alike.
+            mode = "inline" if self.tracker.best is None and not self._pending else "pipelined"
         t0 = time.perf_counter()
         try:  # a worker gets a copy: the grid changes under it while the stream goes on
             snapshot = self.bev.snapshot(copy=mode == "pipelined")
         except ZflocError:
             snapshot = None
         job = RoundJob(index, snapshot, self.tracker.warm_start(), self.tracker.confidently_tracking and not self._force_global)
-        pending = _Pending(job, index + self.settings.localizer.round_delay, plane_pose, self._force_seq, None)
+        pending = _Pending(job, index + (0 if mode == "inline" else lc.round_delay), plane_pose, self._force_seq, None)
         if mode == "pipelined":
             pending.outcome = self._executor().submit(*self._task(job))
             timings["round_start"] = time.perf_counter() - t0
@@ -290,7 +294,7 @@ class Localizer:
     def _task(self, job: RoundJob) -> tuple:
         if self.settings.localizer.worker == "process":
             return _process_round, job
-        return run_round, self.floorplan, self.settings, job
+        return run_round, self.floorplan, self.settings, job, True
 
     def _apply(self, pending: _Pending, timings: dict) -> str | None:
         """The round's result lands: the tracker updates as of the frame the round started at.
@@ -342,7 +346,7 @@ class Localizer:
             start = Sim2(s, start.theta, start.apply(centre) - s * start.R @ centre)
         field = floorplan_scorer(self.floorplan, est.scoring).face_field
         refine = est.refine.model_copy(update={"outlier_distance": lc.local_outlier_distance})
-        local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed", kernels=est.kernels)[0])
+        local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed")[0])
         # a step from where it started (the drift of one round), never a jump elsewhere
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
         frames = max(1, self.frames_fused - self._local_frame)

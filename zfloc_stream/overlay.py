@@ -7,15 +7,13 @@ and every marker drawn has its legend entry."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .floorplan import Floorplan  # noqa: E402
-from .sim2 import Sim2  # noqa: E402
+if TYPE_CHECKING:
+    from .floorplan import Floorplan
+    from .sim2 import Sim2
 
 
 STATUS_COLOURS = {"initializing": "tab:gray", "tracking": "tab:green", "ambiguous": "tab:purple", "lost": "tab:red"}
@@ -26,8 +24,19 @@ def save_overlay(path: str | Path, floorplan: Floorplan, estimated: np.ndarray, 
     fig = overlay_figure(floorplan, estimated, truth, **kwargs)
     path = Path(path)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _pyplot().close(fig)
     return path
+
+
+def _pyplot():
+    """matplotlib.pyplot on the Agg backend, imported on first use: a CLI error must not
+    wait ~0.5 s for it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def overlay_figure(
@@ -41,6 +50,7 @@ def overlay_figure(
 ):
     """estimated / truth: (N, 3) poses in the floorplan (rows of NaN where none); statuses:
     the status of each estimated frame (the path's colours; one colour without them)."""
+    plt = _pyplot()
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
 

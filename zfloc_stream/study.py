@@ -96,8 +96,14 @@ def user_overrides(config: str | Path | None = None, sets: Iterable[str] = ()) -
     return data
 
 
+# Studies run rounds inline unless told otherwise: offline, there is no push latency to
+# hide, and inline is the reference every table is compared with (a --set overrides it).
+STUDY_BASE = {"localizer": {"pipeline": "inline"}}
+
+
 def cell_settings(overrides: dict, seed: int, base_overrides: dict | None = None) -> Settings:
-    return load_settings(overrides=overrides, base_overrides=base_overrides).model_copy(update={"seed": int(seed)})
+    base = merge_nested(STUDY_BASE, base_overrides or {})
+    return load_settings(overrides=overrides, base_overrides=base).model_copy(update={"seed": int(seed)})
 
 
 @lru_cache(maxsize=8)

@@ -48,8 +48,7 @@ from .config import Settings
 from .documents import MAX_NESTING, real_number, too_deep
 from .errors import FloorplanError
 from .floorplan import MAX_COORDINATE, Floorplan, check_plan_budget
-from .geometry import CircleSet, LineSet
-from .primitives import deduplicate_lines
+from .geometry import CircleSet, LineSet, deduplicate_lines
 
 VECTOR_SUFFIXES = (".dxf", ".svg", ".geojson", ".json")
 ARC_CHORD = 0.05  # m, arcs and curves are flattened to chords deviating at most this much

@@ -19,11 +19,12 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import scipy.fft as sfft
 
+from .. import threads
 from ..config import RefineSettings
 from ..errors import InputError
 from ..geometry import LineSet
+from ..numba_support import njit
 from ..sim2 import Sim2, wrap_angle
 from .refine import refine_batch
 
@@ -84,6 +85,8 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
     """The near-wall mask padded by at least `half` zero cells (rounded up to 16 so calls
     share it), its FFT (cached per floorplan), the padded shape and the world centre of
     the padded cell (0, 0)."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     near, origin = _near_wall_mask(floorplan, cell, tolerance)
     pad = 16 * int(np.ceil(half / 16))
     key = ("spectrum", float(cell), float(tolerance), pad)
@@ -160,6 +163,8 @@ def _angle_template(local: np.ndarray, theta: float, cell: float, half: int) -> 
 def _exact_scores(spectrum: _Spectrum, ij: np.ndarray, n_i: int, n_j: int) -> np.ndarray:
     """The grid counts of every placement, rounded (float64, flat), computed as the
     reference always has: the float64 array an angle's peaks are picked from."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
     template = np.zeros(spectrum.fft_shape, dtype=np.float32)
     np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
     # correlation = IFFT(FFT(mask) * conj(FFT(template))); the mask's FFT is cached
@@ -201,70 +206,16 @@ def _fast_grid(spectrum: _Spectrum, side: int, n_i: int, n_j: int):
     return H, W, spectrum.compact
 
 
-def _template_spectrum(ij: np.ndarray, side: int, H: int, W: int) -> np.ndarray:
-    """conj(FFT) of the template on the H x W grid (complex64)."""
-    template = np.zeros((side, side), dtype=np.float32)
-    np.add.at(template, (ij[:, 1], ij[:, 0]), 1.0)
-    # the template is zero outside its side x side corner: transform only those rows
-    # (columns zero-padded by rfft), then the column transform
-    spec = sfft.fft(sfft.rfft(template, n=W, axis=1), n=H, axis=0)
-    return np.conj(spec, out=spec)
-
-
 @lru_cache(maxsize=8)
 def _mirror_phase(side: int, H: int, W: int) -> np.ndarray:
     """The phase that turns a template's conjugate transform into its 180-degree turn's
-    (_mirrored_spectrum), on the rfft half-grid (H, W // 2 + 1), complex64. Cached: once
+    (search_angles), on the rfft half-grid (H, W // 2 + 1), complex64. Cached: once
     the rolling BEV is full its template side repeats round after round (read-only)."""
     k0 = np.arange(H) / H
     k1 = np.arange(W // 2 + 1) / W
     phase = np.exp(2j * np.pi * (side - 1) * (k0[:, None] + k1[None, :])).astype(np.complex64)
     phase.flags.writeable = False
     return phase
-
-
-def _mirrored_spectrum(conj_spec: np.ndarray, phase: np.ndarray) -> np.ndarray:
-    """conj(FFT) of the template turned by 180 degrees (cell (r, c) -> (side-1-r, side-1-c))
-    from the template's own: reflecting a real signal conjugates its transform, and the
-    shift by side - 1 is a phase, so the forward transforms of half the angles are free."""
-    return phase * np.conj(conj_spec)
-
-
-def _fast_peaks(spectrum: _Spectrum, ij: np.ndarray, side: int, n_i: int, n_j: int, per_angle: int, conj_spec=None):
-    """One angle's `per_angle` best placements from a float32 correlation: (flat indices,
-    counts, conj_spec), the same set as _exact_peaks. None when the float32 pass cannot
-    vouch for its counts. conj_spec: the template's conjugate transform on this pass's
-    grid when known (_mirrored_spectrum); it only changes float rounding, which the
-    counts' check covers."""
-    if n_i * n_j <= per_angle or n_i < per_angle:
-        return None
-    H, W, values = _fast_grid(spectrum, side, n_i, n_j)
-    if conj_spec is None:
-        conj_spec = _template_spectrum(ij, side, H, W)
-    spec = conj_spec * values
-    # the inverse keeps only the n_i rows of valid placements before its row transform
-    score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)[:, :n_j]
-    picked = _pick_peaks(score, per_angle)
-    return None if picked is None else (*picked, conj_spec)
-
-
-def _pick_peaks(score: np.ndarray, per_angle: int):
-    """(flat indices i * n_j + j, counts) of the per_angle best placements of a float32
-    correlation score (n_i, n_j), or None when its counts cannot be vouched for."""
-    n_j = score.shape[1]
-    # the per_angle-th largest count is at least the per_angle-th largest row maximum, so
-    # every placement at or above it lies in these rows: cand holds all of them, ascending
-    row_max = score.max(axis=1)
-    floor_count = np.round(np.partition(row_max, -per_angle)[-per_angle])
-    rows = np.flatnonzero(row_max >= floor_count - 0.5)
-    r, c = np.nonzero(score[rows] >= floor_count - 0.5)
-    cand = rows[r] * n_j + c
-    raw = score[rows[r], c].astype(np.float64)
-    counts = np.round(raw)
-    if len(cand) < per_angle or np.abs(raw - counts).max() > _ROUNDING_SLACK:
-        return None
-    keep = _spread_best(counts, np.partition(counts, -per_angle)[-per_angle], per_angle)
-    return cand[keep], counts[keep]
 
 
 def correlative_models(
@@ -277,7 +228,6 @@ def correlative_models(
     tolerance: float = 0.15,
     peaks: int = 8,
     angles: np.ndarray | None = None,
-    kernels: str = "numpy",
 ) -> np.ndarray:
     """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
     distinct (1 m at the points' centre, or 10 deg).
@@ -287,13 +237,10 @@ def correlative_models(
 
     Each angle's per_angle best placements (the highest float64 counts, ties spread evenly
     in placement order, as correlative_models_reference) come from a float32 FFT instead,
-    whose counts are checked to round to the same integers. Where the
-    angle grid holds each angle's 180-degree turn, the turn's template transform comes from
-    the angle's own (_mirrored_spectrum: one forward FFT per pair). With every angle
-    searched the result is the reference's, bit for bit.
-
-    kernels: "numba" runs the per-angle loop with compiled rasterisation, spectrum products
-    and peak picking (correlative_numba.search_angles): the same models, bit for bit."""
+    whose counts are checked to round to the same integers (search_angles: compiled
+    rasterisation, spectrum products and peak picking around scipy's transforms). With
+    every angle searched the result is the reference's, bit for bit; the angles run on the
+    round's threads (threads.py), each writing its own slot."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))
@@ -308,37 +255,9 @@ def correlative_models(
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
     n_angles = len(thetas_grid)
     searched = np.ones(n_angles, dtype=bool) if angles is None else np.asarray(angles, dtype=bool).reshape(n_angles)
-    nothing = (np.zeros(0, dtype=np.int64), np.zeros(0))
-    found, templates = [nothing] * n_angles, [None] * n_angles
-    # angle a + half_turn is angle a turned by 180 degrees: visited right after a, its
-    # template is a's reflected (checked cell by cell, floor rounding can differ) and its
-    # transform then follows from a's (_mirrored_spectrum)
+    # angle a + half_turn is angle a turned by 180 degrees (searched as a pair)
     half_turn = n_angles // 2 if n_angles % 2 == 0 and np.isclose(thetas_grid[n_angles // 2], np.pi) else 0
-    if kernels == "numba":
-        from . import correlative_numba
-
-        found = correlative_numba.search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half, n_i, n_j, per_angle)
-        (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
-        return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
-    order = [a + h for a in range(half_turn) for h in (0, half_turn)] + list(range(2 * half_turn, n_angles))
-    order = [a for a in order if searched[a]]
-    phase = _mirror_phase(side, *_fast_grid(spectrum, side, n_i, n_j)[:2]) if half_turn else None
-    partner_spec = None
-    for a in order:
-        ij = templates[a] = _angle_template(local, thetas_grid[a], cell, half)
-        conj_spec = None
-        partner = templates[a - half_turn] if half_turn and a >= half_turn else None
-        if partner_spec is not None and partner is not None and np.array_equal(ij, (side - 1) - partner):
-            conj_spec = _mirrored_spectrum(partner_spec, phase)
-        partner_spec = None
-        fast = _fast_peaks(spectrum, ij, side, n_i, n_j, per_angle, conj_spec)
-        if fast is None:
-            found[a] = _exact_peaks(spectrum, ij, n_i, n_j, per_angle)
-            continue
-        best, counts, spec = fast
-        found[a] = (best, counts)
-        if half_turn and a < half_turn:
-            partner_spec = spec
+    found = search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half, n_i, n_j, per_angle)
     (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
     return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
 
@@ -424,3 +343,236 @@ def correlative_search(
         matches.append(CorrelativeMatch(alignment, matched, len(thinned)))
     matches.sort(key=lambda m: -m.matched)
     return matches
+
+
+# --------------------------------------------------------------------------------------
+# the per-angle search, compiled around scipy's transforms: the template's rasterisation,
+# the products with the mask's transform (both angles of a 180-degree pair in one pass)
+# and the peak picking (row maxima, candidates, rounding check, even spread of ties) in
+# one pass over the float32 correlation, without temporaries
+# --------------------------------------------------------------------------------------
+
+
+@njit
+def _template(ij, side, W):
+    """The template (side rows, W columns: the rfft's zero padding included) with
+    ij's (col, row) cells counted, float32 (small integers: exact)."""
+    t = np.zeros((side, W), np.float32)
+    for p in range(ij.shape[0]):
+        t[ij[p, 1], ij[p, 0]] += np.float32(1.0)
+    return t
+
+
+@njit
+def _pair_products(F, M, M2, b):
+    """F (the template's forward transform) becomes conj(F) * M in place (the angle's
+    correlation spectrum); with b (b.shape == F.shape, else ignored), b = F * M2, the
+    spectrum of the template turned by 180 degrees (M2 = M * mirror phase)."""
+    both = b.shape[0] == F.shape[0]
+    for r in range(F.shape[0]):
+        for k in range(F.shape[1]):
+            f = F[r, k]
+            if both:
+                b[r, k] = f * M2[r, k]
+            F[r, k] = np.conj(f) * M[r, k]
+
+
+@njit
+def _row_maxima(score, n_j):
+    """The maxima of score[r, :n_j] per row (float32, exact), or an empty array when a
+    value is not finite. Eight running maxima and sums of v - v (0 where finite) per row:
+    independent lanes that the compiler vectorises (one running maximum would not be,
+    without fastmath)."""
+    n_i = score.shape[0]
+    out = np.empty(n_i, np.float32)
+    zero = np.float32(0.0)
+    for r in range(n_i):
+        m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = score[r, 0]
+        d0 = d1 = d2 = d3 = d4 = d5 = d6 = d7 = zero
+        c = 0
+        while c + 8 <= n_j:
+            v = score[r, c]
+            m0 = v if v > m0 else m0
+            d0 += v - v
+            v = score[r, c + 1]
+            m1 = v if v > m1 else m1
+            d1 += v - v
+            v = score[r, c + 2]
+            m2 = v if v > m2 else m2
+            d2 += v - v
+            v = score[r, c + 3]
+            m3 = v if v > m3 else m3
+            d3 += v - v
+            v = score[r, c + 4]
+            m4 = v if v > m4 else m4
+            d4 += v - v
+            v = score[r, c + 5]
+            m5 = v if v > m5 else m5
+            d5 += v - v
+            v = score[r, c + 6]
+            m6 = v if v > m6 else m6
+            d6 += v - v
+            v = score[r, c + 7]
+            m7 = v if v > m7 else m7
+            d7 += v - v
+            c += 8
+        m = max(max(max(m0, m1), max(m2, m3)), max(max(m4, m5), max(m6, m7)))
+        d = ((d0 + d1) + (d2 + d3)) + ((d4 + d5) + (d6 + d7))
+        while c < n_j:
+            v = score[r, c]
+            m = v if v > m else m
+            d += v - v
+            c += 1
+        if d != 0 or m - m != 0:  # a NaN or an infinity
+            return out[:0]
+        out[r] = m
+    return out
+
+
+@njit
+def _kth_largest(values, k):
+    s = np.sort(values)
+    return s[values.shape[0] - k]
+
+
+@njit
+def _pick(score, n_j, per_angle, slack):
+    """The per_angle best placements of a float32 correlation score (n_i rows, >= n_j columns):
+    (flat placement indices i * n_j + j, counts, ok). ok False: the float32 pass cannot
+    vouch for its counts (too few candidates, a count off its integer by more than slack,
+    or a non-finite value): use the exact pass."""
+    n_i = score.shape[0]
+    none = (np.zeros(0, np.int64), np.zeros(0, np.float64), False)
+    row_max = _row_maxima(score, n_j)
+    if row_max.shape[0] != n_i:
+        return none
+    # the per_angle-th largest count is at least the per_angle-th largest row maximum, so
+    # every placement at or above it lies in these rows
+    floor_count = np.rint(_kth_largest(row_max, per_angle))
+    threshold = floor_count - np.float32(0.5)
+    n = 0
+    for r in range(n_i):
+        if row_max[r] >= threshold:
+            for c in range(n_j):
+                n += score[r, c] >= threshold
+    if n < per_angle:
+        return none
+    cand = np.empty(n, np.int64)
+    counts = np.empty(n, np.float64)
+    q = 0
+    for r in range(n_i):
+        if row_max[r] >= threshold:
+            for c in range(n_j):
+                if score[r, c] >= threshold:
+                    raw = np.float64(score[r, c])
+                    count = np.rint(raw)
+                    if not abs(raw - count) <= slack:
+                        return none
+                    cand[q] = r * n_j + c
+                    counts[q] = count
+                    q += 1
+    # _spread_best: every count above the boundary, then the tied ones at
+    # np.round(np.linspace(0, n_at - 1, wanted)) of them, in index order
+    boundary = _kth_largest(counts, per_angle)
+    n_above = 0
+    n_at = 0
+    for q in range(n):
+        n_above += counts[q] > boundary
+        n_at += counts[q] == boundary
+    wanted = per_angle - n_above
+    picked = np.zeros(n_at, np.bool_)
+    if n_at <= wanted:
+        picked[:] = True
+    elif wanted == 1:
+        picked[0] = True  # np.linspace(0, stop, 1) == [0.0]
+    elif wanted > 1:
+        step = np.float64(n_at - 1) / np.float64(wanted - 1)
+        for k in range(wanted - 1):
+            picked[np.int64(np.rint(np.float64(k) * step + 0.0))] = True
+        picked[n_at - 1] = True  # linspace's endpoint is stop exactly
+    best = np.empty(per_angle, np.int64)
+    best_counts = np.empty(per_angle, np.float64)
+    k = 0
+    t = 0
+    for q in range(n):
+        keep = counts[q] > boundary
+        if counts[q] == boundary:
+            keep = picked[t]
+            t += 1
+        if keep:
+            best[k] = cand[q]
+            best_counts[k] = counts[q]
+            k += 1
+    return best[:k], best_counts[:k], True
+
+
+def _forward(ij, side, H, W):
+    """The template's (unconjugated) transform on the H x W grid, complex64: the row
+    transforms of its side rows only, then the column transforms."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
+    return sfft.fft(sfft.rfft(_template(ij, side, W), axis=1), n=H, axis=0, overwrite_x=True)
+
+
+def _peaks(spec, n_i, n_j, W, per_angle):
+    """(flat indices, counts) from one angle's correlation spectrum (overwritten), or None."""
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
+    # the inverse keeps only the n_i rows of valid placements before its row transform
+    score = sfft.irfft(sfft.ifft(spec, axis=0, overwrite_x=True)[:n_i], n=W, axis=1)
+    best, counts, ok = _pick(score, n_j, per_angle, _ROUNDING_SLACK)
+    return (best, counts) if ok else None
+
+
+def search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half, n_i, n_j, per_angle):
+    """Per angle of the grid, (flat placement indices, counts) of its per_angle best
+    placements (empty for angles not searched). Angle a and a + half_turn (its 180-degree
+    turn) are searched as a pair: the turn's template is a's reflected (checked cell by
+    cell, floor rounding can differ) and its spectrum then follows from a's forward
+    transform (one FFT per pair). Each angle's peaks come from a float32 correlation whose
+    counts are checked to round to their integers (_pick); an angle whose check fails is
+    recomputed by the exact float64 pass (_exact_peaks), so the peaks are the reference's."""
+    n_angles = len(thetas_grid)
+    side = 2 * half
+    nothing = (np.zeros(0, dtype=np.int64), np.zeros(0))
+    found = [nothing] * n_angles
+    templates = [None] * n_angles
+
+    def template(a):
+        if templates[a] is None:
+            templates[a] = np.ascontiguousarray(_angle_template(local, thetas_grid[a], cell, half))
+        return templates[a]
+
+    if n_i * n_j <= per_angle or n_i < per_angle:  # nothing to prune: the exact pass
+        for a in np.flatnonzero(searched):
+            found[a] = _exact_peaks(spectrum, template(a), n_i, n_j, per_angle)
+        return found
+    H, W, M = _fast_grid(spectrum, side, n_i, n_j)
+    # turn partners: a and a + half_turn (a's 180-degree turn), whose spectrum is F * M2
+    pairs = [(a, a + half_turn) for a in range(half_turn)] + [(a, -1) for a in range(2 * half_turn, n_angles)]
+    M2 = M * _mirror_phase(side, H, W) if half_turn else None
+    empty = np.zeros((0, 0), np.complex64)
+
+    def search_pair(pair):
+        a, b = pair
+        do_a, do_b = bool(searched[a]), b >= 0 and bool(searched[b])
+        if not do_a:
+            a, b, do_a, do_b = b, -1, True, False
+        ij = template(a)
+        F = _forward(ij, side, H, W)
+        # b's template is a's reflected cell by cell (floor rounding can differ: checked)
+        mirrored = do_b and np.array_equal(template(b), (side - 1) - ij)
+        spec_b = np.empty_like(F) if mirrored else empty
+        _pair_products(F, M, M2 if mirrored else M, spec_b)
+        for angle, spec in ((a, F), (b, spec_b if mirrored else None)):
+            if angle < 0 or (angle == b and not do_b):
+                continue
+            if spec is None:
+                spec = _forward(template(angle), side, H, W)
+                _pair_products(spec, M, M, empty)
+            fast = _peaks(spec, n_i, n_j, W, per_angle)
+            found[angle] = fast if fast is not None else _exact_peaks(spectrum, template(angle), n_i, n_j, per_angle)
+
+    # pairs are independent (each writes its own angles' slots): spread over the round's threads
+    threads.run(search_pair, [(a, b) for a, b in pairs if searched[a] or (b >= 0 and searched[b])])
+    return found

@@ -56,8 +56,10 @@ from ..sim2 import Sim2, wrap_angle
 from .correlative import correlative_models, plausible_angles
 from ..ties import descending, tie_keys
 from .refine import refine_batch
-from .scoring import BevView, distinct, floorplan_scorer, implied_poses, rank_coarse_to_fine, score_hypotheses, sparse_line_points
-from .solvers import _angle as _line_angle, solve_2c, solve_2l, solve_3l, solve_3l_indexed, solve_lc
+from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .views import BevView, implied_poses
+from .draws import admissible_triplets, draw
+from .solvers import drawn_2l, drawn_3l, normal_angle, solve_2c, solve_2l, solve_3l, solve_lc
 
 WARM = "warm"
 CORRELATIVE = "correlative"
@@ -141,18 +143,6 @@ def _neighbour_lists(lines: LineSet, distance: float) -> list[np.ndarray]:
     return [np.flatnonzero(row) for row in near]
 
 
-def _ordered_triplets(neighbours: Sequence[np.ndarray]) -> np.ndarray:
-    """(T, 3) rows (i, j, k): j != k both neighbours of i."""
-    out = []
-    for i, nb in enumerate(neighbours):
-        if len(nb) < 2:
-            continue
-        j, k = np.meshgrid(nb, nb, indexing="ij")
-        keep = j != k
-        out.append(np.stack([np.full(keep.sum(), i), j[keep], k[keep]], axis=1))
-    return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
-
-
 def _nearest_neighbours(lines: LineSet, neighbours: Sequence[np.ndarray], max_rows: int) -> tuple[list[np.ndarray], int | None]:
     """Neighbour lists thinned so that their ordered triplets (sum of k (k - 1)) fit in
     max_rows: each line keeps its K nearest neighbours (segment distance, ties by index),
@@ -231,8 +221,6 @@ class _AngleTable:
         key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
         order = np.argsort(key, kind="stable")
         self.rows = rows[order]
-        # the same rows, one contiguous int32 array per column (cheap gathers)
-        self.columns = [np.ascontiguousarray(self.rows[:, k], dtype=np.int32) for k in range(self.rows.shape[1])] if self.rows.ndim == 2 else []
         counts = np.bincount(key, minlength=self.n_bins**self.q)
         self.counts = counts
         self.start = np.cumsum(counts) - counts
@@ -269,31 +257,6 @@ class _AngleTable:
         return self.start[key], np.where(valid, self.counts[key], 0)
 
 
-def _draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator, kernels: str = "numpy") -> tuple[np.ndarray, np.ndarray]:
-    """For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b)
-    uniform draws (with replacement) from its n_b candidates. Returns (query, table row)."""
-    if kernels == "numba":
-        from .ransac_numba import draw  # the optional [fast] extra, imported on first use
-
-        return draw(starts, sizes, fraction, rng)
-    n = sizes.sum(axis=1)
-    k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
-    query = np.repeat(np.arange(len(n)), k)
-    if len(query) == 0:
-        return query, np.zeros(0, dtype=np.int64)
-    nq = n[query]
-    u = np.minimum((rng.random(len(query)) * nq).astype(np.int64), nq - 1)
-    # The range r holding draw u (the number of cumulative sizes <= u), for all draws at
-    # once: one search in the rows' cumulative sizes laid end to end (row b shifted by
-    # b * big), which lands on position b * R + r; the table row is then
-    # starts[b, r] + u - (cum[b, r] - sizes[b, r]).
-    cum = np.cumsum(sizes, axis=1)
-    big = int(n.max()) + 1
-    base = np.arange(len(n), dtype=np.int64) * big
-    pos = np.searchsorted((cum + base[:, None]).ravel(), base[query] + u, side="right")
-    return query, u + (starts - cum + sizes).ravel()[pos]
-
-
 # --------------------------------------------------------------------------------------
 # floorplan tables (built once per floorplan object and settings)
 # --------------------------------------------------------------------------------------
@@ -322,12 +285,10 @@ class FloorplanMatches:
             warnings.warn(f"floorplan {getattr(floorplan, 'name', '')!r}: its {len(self.lines)} lines have more line triplets than "
                           f"floorplan.max_triplets ({fp_cfg.max_triplets:,}), a cluttered map: each line's triplets use its {kept} "
                           "nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
-        tri = _ordered_triplets(near)
-        if len(tri):
-            a = alpha[tri]
-            keep = ~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))
-            tri = tri[keep]
+        tri = admissible_triplets(near, alpha, par, self.lines.lengths)[0]
         self.triplets = _AngleTable(tri, (alpha[tri[:, 1:]] - alpha[tri[:, :1]]) if len(tri) else np.zeros((0, 2)), tol)
+        # the triplets' first two lines, for the two-line solve at a fixed scale
+        self.triplet_heads = np.ascontiguousarray(self.triplets.rows[:, :2], dtype=np.int64)
         # 2L: a line and a non-parallel neighbour
         pairs = _ordered_pairs(neighbours)
         if len(pairs):
@@ -368,8 +329,7 @@ def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
 class BevSamples:
     """Every admissible minimal sample of BEV primitives, per solver."""
 
-    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float,
-                 kernels: str = "numpy"):
+    def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float):
         self.lines = deduplicate_lines(obs.lines, line_settings) if len(obs.lines) else obs.lines
         self.circles = obs.circles
         par = np.deg2rad(solvers.parallel_angle_deg)
@@ -385,15 +345,7 @@ class BevSamples:
 
         def triplets(nb):
             """The admissible triplets and their sampling weights (the shortest line's length)."""
-            if kernels == "numba":  # the same table compiled (ransac_numba; a long walk's BEV holds hundreds of lines)
-                from .ransac_numba import admissible_triplets
-
-                return admissible_triplets(nb, alpha, par, lengths)
-            tri = _ordered_triplets(nb)
-            if len(tri):
-                a = alpha[tri]
-                tri = tri[~(_parallel_mod_pi(a[:, 0], a[:, 1], par) & _parallel_mod_pi(a[:, 0], a[:, 2], par))]
-            return tri, (lengths[tri].min(axis=1) if len(tri) else np.zeros(0))
+            return admissible_triplets(nb, alpha, par, lengths)
 
         def pairs_of(nb):
             pairs = _ordered_pairs(nb)
@@ -431,7 +383,7 @@ def _probabilities(weights: np.ndarray) -> np.ndarray | None:
 
 def _line_angles(lines: LineSet) -> np.ndarray:
     """Angle of each line's normal, as the solvers compute it for a sample's anchor."""
-    return _line_angle(lines.normals)
+    return normal_angle(lines.normals)
 
 
 def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -441,47 +393,30 @@ def _relative(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def _models_3l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.triplets[rng.choice(len(bev.triplets), size=n, p=bev.triplet_p)]
     starts, sizes = fp.triplets.ranges(_relative(bev.alpha, picks))
-    if cfg.kernels == "numba" and cfg.scale_mode != "fixed":
-        from .solvers_numba import drawn_3l  # the optional [fast] extra, imported on first use
-
-        # draw and solve in one compiled loop: the same random numbers, the same models
-        return drawn_3l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.triplets.rows, bev.lines, fp.lines,
-                        _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
     if cfg.scale_mode == "fixed":
-        b, f = picks[q], fp.triplets.rows[row]
-        return solve_3l(
-            bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], cfg.solvers, cfg.scale_mode
-        )[0]
-    # per-column int32 indices (the same lines as picks[q], rows[row]), cheaper to gather
-    b = [np.ascontiguousarray(picks[:, k], dtype=np.int32)[q] for k in range(3)]
-    f = [col[row] for col in fp.triplets.columns]
-    return solve_3l_indexed(bev.lines, fp.lines, b, f, _line_angles(bev.lines), fp.line_angles, cfg.solvers, kernels=cfg.kernels)[0]
+        # at a fixed scale the third line adds nothing: the rigid two-line solve of the
+        # anchor and the second line (solve_3l's fixed mode), drawn and solved compiled
+        return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks[:, :2], fp.triplet_heads, bev.lines, fp.lines,
+                        _line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "fixed")[0]
+    # draw and solve in one compiled loop
+    return drawn_3l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.triplets.rows, bev.lines, fp.lines,
+                    _line_angles(bev.lines), fp.line_angles, cfg.solvers)[0]
 
 
 def _models_2l(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng, scale_prior: float):
     picks = bev.pairs[rng.choice(len(bev.pairs), size=n, p=bev.pair_p)]
     starts, sizes = fp.pairs.ranges(_relative(bev.alpha, picks))
     mode = "fixed" if cfg.scale_mode == "fixed" else "prior"
-    if cfg.kernels == "numba":
-        from .solvers_numba import drawn_2l  # the optional [fast] extra, imported on first use
-
-        # draw and solve in one compiled loop: the same random numbers (draws, then the
-        # scale noise), the same models
-        return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.pairs.rows, bev.lines, fp.lines,
-                        _line_angles(bev.lines), fp.line_angles, scale_prior, cfg.solvers, mode)[0]
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
-    b, f = picks[q], fp.pairs.rows[row]
-    return solve_2l(
-        bev.lines.normals[b], bev.lines.offsets[b], fp.lines.normals[f], fp.lines.offsets[f], scale_prior, rng, cfg.solvers, mode
-    )[0]
+    # draw and solve in one compiled loop (the draws' random numbers, then the scale noise)
+    return drawn_2l(starts, sizes, cfg.ransac.match_fraction, rng, picks, fp.pairs.rows, bev.lines, fp.lines,
+                    _line_angles(bev.lines), fp.line_angles, scale_prior, cfg.solvers, mode)[0]
 
 
 def _models_lc(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSettings, rng):
     picks = bev.line_circle[rng.choice(len(bev.line_circle), size=n, p=bev.line_circle_p)]
     starts = np.zeros((n, 1), dtype=np.int64)
     sizes = np.full((n, 1), len(fp.line_circle), dtype=np.int64)
-    q, row = _draw(starts, sizes, cfg.ransac.match_fraction, rng, cfg.kernels)
+    q, row = draw(starts, sizes, cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.line_circle[row]
     return solve_lc(
         bev.lines.normals[b[:, 0]],
@@ -502,7 +437,7 @@ def _models_2c(bev: BevSamples, fp: FloorplanMatches, n: int, cfg: EstimatorSett
     picks, dist = bev.circle_pairs[pick], bev.circle_dist[pick]
     lo = np.searchsorted(fp.circle_dist, cfg.solvers.min_scale * dist, side="left")
     hi = np.searchsorted(fp.circle_dist, cfg.solvers.max_scale * dist, side="right")
-    q, row = _draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng, cfg.kernels)
+    q, row = draw(lo[:, None], (hi - lo)[:, None], cfg.ransac.match_fraction, rng)
     b, f = picks[q], fp.circle_pairs[row]
     return solve_2c(
         bev.circles.centers[b], fp.circles.centers[f], cfg.solvers, cfg.scale_mode, bev.circles.radii[b], fp.circles.radii[f]
@@ -542,12 +477,12 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
     models = correlative_models(
         floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
-        peaks=c.peaks, angles=angles, kernels=cfg.kernels,
+        peaks=c.peaks, angles=angles,
     )
     if len(models) == 0:
         return np.zeros((0, 4))
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
+    return refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
 
 
 def _guided_candidates(lines: LineSet, fp_lines: LineSet, warm: Sim2, cfg) -> tuple[np.ndarray, np.ndarray]:
@@ -604,8 +539,8 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     (same implied pose at the BEV anchor), so the tracker can judge every live mode."""
     models = model_rows(warm)
     field = floorplan_scorer(floorplan, cfg.scoring).face_field
-    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale), kernels=cfg.kernels)
-    scores = score_hypotheses(floorplan, view, models, cfg.scoring, kernels=cfg.kernels)
+    models = refine_batch(field, obs.wall_points, models, cfg.refine, cfg.scale_mode, (cfg.solvers.min_scale, cfg.solvers.max_scale))
+    scores = score_hypotheses(floorplan, view, models, cfg.scoring)
     rows = []
     for i, m in enumerate(models):
         both = np.vstack([m[None], kept]) if len(kept) else m[None]
@@ -662,7 +597,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     # ---- model estimation ------------------------------------------------------------
     full_cfg = _settings_of(floorplan)
     fp = floorplan_matches(floorplan, cfg.solvers)
-    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior, cfg.kernels)
+    bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
     pool = solver_pool(cfg, bev, fp)
     warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
     blocks, labels = [], []
@@ -705,7 +640,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         return LocalizationResult([], {"model_estimation": t1 - t0, **zero}, 0, {"model_estimation": c1 - c0, **zero})
     sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
     view = BevView.of(obs, cfg.scoring.tau_v)
-    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring, kernels=cfg.kernels)
+    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
     t2, c2 = time.perf_counter(), time.thread_time()
 
     # ---- refinement --------------------------------------------------------------------
@@ -718,8 +653,8 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
         field = floorplan_scorer(floorplan, cfg.scoring).face_field
-        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds, kernels=cfg.kernels)
-        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring, kernels=cfg.kernels)
+        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
+        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
         better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
         cand[:n_refine][better] = refined[better]
         total[:n_refine][better] = rescored.total[better]

@@ -20,60 +20,38 @@ BEV wall points (the paper's Cc), and Cv.
 Cv deviation from the paper: f^v is the distance to the nearest cell that is not observed
 free (see BevView), which tolerates free space touching walls seen at grazing incidence.
 
-Everything is vectorised over hypotheses, in chunks of at most chunk_size
-(hypotheses x points) elements to bound memory.
+The three scores are compiled loops (numba) over hypotheses and points: per point the
+float operations are element-wise (the same cell, the same test on any thread count), and
+what is summed are integer counts (and the coarse grid's uint8 levels), exact in any
+order. A call over many hypotheses is split into ranges of them, one per thread the round
+was given (threads.py), each writing its own slots: the same bits. The torch backend
+(scoring_torch.py) computes the same scores on tensors.
 """
 
 from __future__ import annotations
 
+import math
 import weakref
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
-from scipy import ndimage
 
+from .. import threads
 from ..config import ScoringSettings
+from ..errors import InputError
 from ..geometry import LineSet
 from ..observation import BevObservation
+from .views import DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (transform_points: public here too)
 from ..sim2 import wrap_angle
-from ..ties import descending
-
-# --------------------------------------------------------------------------------------
-# transforms
-# --------------------------------------------------------------------------------------
-
-
-def transform_points(models: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(H, N, 2): every point mapped by every model."""
-    models = np.asarray(models, dtype=float).reshape(-1, 4)
-    p = np.asarray(points, dtype=float).reshape(-1, 2)
-    a = models[:, 3] * np.cos(models[:, 2])
-    b = models[:, 3] * np.sin(models[:, 2])
-    x = a[:, None] * p[None, :, 0] - b[:, None] * p[None, :, 1] + models[:, 0, None]
-    y = b[:, None] * p[None, :, 0] + a[:, None] * p[None, :, 1] + models[:, 1, None]
-    return np.stack([x, y], axis=-1)
-
-
-def implied_poses(models: np.ndarray, anchor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Floorplan position of the BEV point `anchor` under each model, and the heading."""
-    return transform_points(models, np.asarray(anchor, dtype=float).reshape(1, 2))[:, 0], np.asarray(models)[:, 2]
-
-
-def _chunks(n_models: int, n_points: int, chunk_size: int):
-    step = max(1, chunk_size // max(n_points, 1))
-    for lo in range(0, n_models, step):
-        yield slice(lo, min(lo + step, n_models))
-
+from ..numba_support import njit
+from ..ties import descending, tie_keys
 
 # --------------------------------------------------------------------------------------
 # floorplan-side precomputation (cached per floorplan object)
 # --------------------------------------------------------------------------------------
 
 
-UNSEEN, FREE, DEEP_FREE, WALL = 0, 1, 2, 3  # BevView.state codes
 MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
-_CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk (four 1 MiB scratch buffers)
 
 
 @dataclass(frozen=True)
@@ -95,6 +73,8 @@ class FaceField:
 
     @classmethod
     def of(cls, floorplan) -> FaceField:
+        from scipy import ndimage  # here, not at import: a CLI error must not pay for it
+
         res = float(floorplan.resolution)
         origin = np.asarray(floorplan.origin, dtype=float)
         occupied = getattr(floorplan, "occupied", None)
@@ -117,6 +97,201 @@ class FaceField:
         # sensor sees is its edge, so the distance to the surface is about half a cell
         # less (without this, refined scales come out ~1-2 % large in small rooms).
         return cls(np.maximum(ndimage.distance_transform_edt(~faces, sampling=res) - 0.5 * res, 0.0), origin, res)
+
+
+# --------------------------------------------------------------------------------------
+# compiled score kernels (read a FloorplanScorer's arrays; trigonometry stays in numpy)
+# --------------------------------------------------------------------------------------
+
+
+# a kernel call is split over the round's threads (threads.py) only into pieces of at
+# least this many point lookups (~0.2 ms): handing a piece to a worker costs ~0.05 ms
+_MIN_LOOKUPS_PER_THREAD = 200_000
+_MIN_VIOLATION_MODELS_PER_THREAD = 64  # violation: a model reads the floorplan walls under its footprint
+
+
+def _model_ranges(n_models: int, n_points: int) -> list[tuple[int, int]]:
+    return threads.ranges(n_models, _MIN_LOOKUPS_PER_THREAD // max(1, n_points) + 1)
+
+
+@njit
+def _coarse_kernel(models, c, sn, inv, ox, oy, px, py, grid, h, w, index_type, out):
+    """FloorplanScorer.coarse_consistency for every model, coarse_terms included: a, b,
+    cu, cv are its float64 expressions (c, sn: numpy's cos and sin of the headings)
+    rounded to float32; the float32 cell coordinates a x - b y + cu and b x + a y + cv,
+    clipped to the grid and truncated, index the uint8 coarse grid; out = (near - spread /
+    (1 + 1/n)) / n. index_type: np.uint32 when every cell index fits in 32 bits (the
+    index arithmetic then vectorises in 32-bit lanes, ~25 % faster), else np.uint64."""
+    n = px.shape[0]
+    col_max = np.float32(w - 1)  # np.clip's bounds, float32 like the array it clips
+    row_max = np.float32(h - 1)
+    zero = np.float32(0.0)
+    for i in range(models.shape[0]):
+        # coarse_terms: (s cos) * inv, (s sin) * inv, (t - origin) * inv, then float32
+        ai = np.float32(models[i, 3] * c[i] * inv)
+        bi = np.float32(models[i, 3] * sn[i] * inv)
+        cui = np.float32((models[i, 0] - ox) * inv)
+        cvi = np.float32((models[i, 1] - oy) * inv)
+        far = 0
+        total = 0
+        for j in range(n):
+            x = ai * px[j] - bi * py[j] + cui
+            y = bi * px[j] + ai * py[j] + cvi
+            # clipped by selects (branch-free, so the loop vectorises); the first select
+            # also sends NaN to the border ring, which reads as far from any wall, instead
+            # of an arbitrary address
+            x = x if x >= zero else zero
+            x = x if x <= col_max else col_max
+            y = y if y >= zero else zero
+            y = y if y <= row_max else row_max
+            # truncation of a value in [0, w - 1], as numpy's cast to int32; the unsigned
+            # index also spares numba's negative-index wraparound test
+            q = grid[index_type(np.int32(y) * w + np.int32(x))]
+            total += q
+            far += q == 255
+        near = n - far
+        spread = total / (255.0 * n)
+        out[i] = (near - spread / (1.0 + 1.0 / n)) / n
+
+
+@njit
+def _consistency_kernel(a, b, tx, ty, px, py, field, h, w, ox, oy, res, tau_c, out):
+    """FloorplanScorer.consistency for every model: the points mapped by x' = s R x + t
+    (a = s cos, b = s sin), f^c by Floorplan.distance's bilinear lookup, out = the share
+    below tau_c. False (out unfinished) when a mapped point is not finite, where
+    Floorplan.distance raises."""
+    n = px.shape[0]
+    for i in range(a.shape[0]):
+        ai, bi, txi, tyi = a[i], b[i], tx[i], ty[i]
+        below = 0
+        for j in range(n):
+            x = ai * px[j] - bi * py[j] + txi
+            y = bi * px[j] + ai * py[j] + tyi
+            if not (math.isfinite(x) and math.isfinite(y)):
+                return False
+            u = (x - ox) / res - 0.5
+            v = (y - oy) / res - 0.5
+            uc = min(max(u, 0.0), w - 1.0)
+            vc = min(max(v, 0.0), h - 1.0)
+            c0 = min(np.int64(uc), w - 2)
+            r0 = min(np.int64(vc), h - 2)
+            fu = uc - c0
+            fv = vc - r0
+            k = r0 * w + c0
+            top = field[k] * (1.0 - fu) + field[k + 1] * fu
+            bottom = field[k + w] * (1.0 - fu) + field[k + w + 1] * fu
+            value = top * (1.0 - fv) + bottom * fv
+            # outside the grid: plus the distance to it. Inside, numpy adds hypot(0, 0) = 0,
+            # which cannot change the comparison (value >= 0), so the call is skipped.
+            if u != uc or v != vc:
+                value = value + math.hypot(u - uc, v - vc) * res
+            if value < tau_c:
+                below += 1
+        out[i] = below / n
+    return True
+
+
+@njit
+def _violation_kernel(tx, ty, c, sn, k, c0, c1, r0, r1, empty, bucket_start, n_cols, walls, state, h, w, ou, ov, observed, out):
+    """FloorplanScorer.violation for every model: the floorplan wall points of the buckets
+    under its footprint box (rows r0..r1, columns c0..c1; one contiguous range per row)
+    pulled back into BEV cells by (R^T (x' - t)) k - origin; of those in observed free
+    space (or any observed cell, `observed`), the share in deep free space."""
+    for i in range(tx.shape[0]):
+        if empty[i]:
+            continue
+        txi, tyi, ci, si, ki = tx[i], ty[i], c[i], sn[i], k[i]
+        n_seen = 0
+        n_bad = 0
+        for r in range(r0[i], r1[i] + 1):
+            for p in range(bucket_start[r * n_cols + c0[i]], bucket_start[r * n_cols + c1[i] + 1]):
+                dx = walls[p, 0] - txi
+                dy = walls[p, 1] - tyi
+                u = (ci * dx + si * dy) * ki - ou
+                v = (-si * dx + ci * dy) * ki - ov
+                if not (u >= 0 and u < w and v >= 0 and v < h):
+                    continue  # outside the BEV grid: unseen
+                s = state[np.int64(v) * w + np.int64(u)]
+                if s == DEEP_FREE:
+                    n_bad += 1
+                    n_seen += 1
+                elif s == FREE or (observed and s > 0):
+                    n_seen += 1
+        if n_seen > 0:
+            out[i] = n_bad / n_seen
+
+
+@njit
+def _greedy_distinct_kernel(x, y, ang, max_distance, max_angle, limit, kept):
+    """Greedy suppression: walks the hypotheses in order and keeps one unless a kept one
+    lies within max_distance (hypot of the implied-position difference) and max_angle
+    (|wrap_angle| of the heading difference), until `limit` are kept; returns how many
+    (their indices in kept)."""
+    two_pi = 2.0 * np.pi
+    n_kept = 0
+    for j in range(x.shape[0]):
+        if n_kept >= limit:
+            break
+        alone = True
+        for k in range(n_kept):
+            i = kept[k]
+            # wrap_angle(ang[j] - ang[i]) = (d + pi) % (2 pi) - pi
+            if math.hypot(x[j] - x[i], y[j] - y[i]) < max_distance and \
+                    abs((ang[j] - ang[i] + np.pi) % two_pi - np.pi) < max_angle:
+                alone = False
+                break
+        if alone:
+            kept[n_kept] = j
+            n_kept += 1
+    return n_kept
+
+
+def descending_prefix(values: np.ndarray, length: int) -> np.ndarray:
+    """The first entries, at least `length` of them (all when there are fewer values), of
+    ties.descending(values), the same indices in the same order, without sorting
+    everything.
+
+    descending orders by (-tie_keys(values), index), stably. With v the length-th smallest
+    key (np.partition), the indices whose key is <= v are exactly a prefix of that order
+    (every other key is larger, or NaN, which sorts last), and sorting them stably, in index
+    order, by key orders them as descending does. Ties at v are all taken, so the prefix
+    may be longer than `length`."""
+    keys = -tie_keys(values)
+    if length >= len(keys):
+        return np.argsort(keys, kind="stable")
+    v = np.partition(keys, length - 1)[length - 1]
+    if np.isnan(v):  # fewer than `length` non-NaN keys: NaNs order among themselves by index
+        return np.argsort(keys, kind="stable")
+    candidates = np.flatnonzero(keys <= v)
+    return candidates[np.argsort(keys[candidates], kind="stable")]
+
+
+def top_distinct(models: np.ndarray, coarse: np.ndarray, anchor: np.ndarray, settings) -> np.ndarray:
+    """rank_coarse_to_fine's choice, order[distinct(models[order], anchor, settings,
+    settings.top_k)] with order = descending(coarse), the same indices in the same order.
+
+    Greedy suppression never looks ahead, so the first top_k survivors depend only on the
+    order's prefix up to the last of them (distinct itself grows its block on that
+    ground): only a prefix of the order is computed (descending_prefix), only its implied
+    poses (implied_poses row by row, the same numbers as on the whole list) and the
+    greedy pass runs compiled. The prefix grows 4x while it yields fewer than top_k."""
+    models = np.asarray(models, dtype=float).reshape(-1, 4)
+    n, limit = len(models), int(settings.top_k)
+    if n == 0 or limit <= 0:
+        return np.zeros(0, dtype=np.int64)
+    max_angle = float(np.deg2rad(settings.distinct_angle_deg))
+    length = min(n, max(256, 16 * limit))
+    while True:
+        order = descending_prefix(coarse, length)
+        rows = models[order]
+        pos, ang = implied_poses(rows, anchor)
+        kept = np.empty(limit, dtype=np.int64)
+        count = _greedy_distinct_kernel(np.ascontiguousarray(pos[:, 0]), np.ascontiguousarray(pos[:, 1]),
+                                        np.ascontiguousarray(ang), float(settings.distinct_translation),
+                                        max_angle, limit, kept)
+        if count >= limit or len(order) >= n:
+            return order[kept[:count]]
+        length = min(n, 4 * len(order))
 
 
 class FloorplanScorer:
@@ -167,76 +342,6 @@ class FloorplanScorer:
                 ((models[:, 0] - self.origin[0]) * inv).astype(np.float32),
                 ((models[:, 1] - self.origin[1]) * inv).astype(np.float32))
 
-    def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
-        """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
-        far from any wall), with ties broken by closeness: the value is
-        Cc - mean(min(f^c, cap) / cap) / (n + 1) for n points, which orders exactly as
-        (Cc, then smaller mean distance). Many hypotheses of one correspondence cluster
-        reach the same Cc on few points; the tie-break makes the cluster's most precise
-        member its representative, which is the one worth re-scoring and refining."""
-        models = np.asarray(models, dtype=float).reshape(-1, 4)
-        out = np.zeros(len(models))
-        if len(points) == 0 or len(models) == 0:
-            return out
-        h, w = self.shape
-        n = len(points)
-        px = np.asarray(points[:, 0], dtype=np.float32)
-        py = np.asarray(points[:, 1], dtype=np.float32)
-        # chunks of at most chunk_size elements, and at most _CACHE_CHUNK so the scratch
-        # buffers stay in cache (each model's value does not depend on the chunking)
-        chunk_size = min(chunk_size, _CACHE_CHUNK)
-        step = max(1, chunk_size // max(n, 1))
-        size = min(step, len(models)) * n
-        # scratch buffers reused across chunks; every operation is the one the plain
-        # expressions below would do (same dtypes, same order), written in place:
-        #   col = clip(a * px - b * py + cu, 0, w - 1) -> int32
-        #   row = clip(b * px + a * py + cv, 0, h - 1) -> int32
-        f1, f2 = np.empty(size, np.float32), np.empty(size, np.float32)
-        icol, irow = np.empty(size, np.int32), np.empty(size, np.int32)
-        gathered = np.empty(size, np.uint8)
-        for sl in _chunks(len(models), n, chunk_size):
-            m = models[sl]
-            k = len(m) * n
-            shape = (len(m), n)
-            b1, b2 = f1[:k].reshape(shape), f2[:k].reshape(shape)
-            col, row = icol[:k].reshape(shape), irow[:k].reshape(shape)
-            a, b, cu, cv = (t[:, None] for t in self.coarse_terms(m))
-            np.multiply(a, px, out=b1)
-            np.multiply(b, py, out=b2)
-            np.subtract(b1, b2, out=b1)
-            np.add(b1, cu, out=b1)
-            np.clip(b1, 0, w - 1, out=b1)
-            np.copyto(col, b1, casting="unsafe")
-            np.multiply(b, px, out=b1)
-            np.multiply(a, py, out=b2)
-            np.add(b1, b2, out=b1)
-            np.add(b1, cv, out=b1)
-            np.clip(b1, 0, h - 1, out=b1)
-            np.copyto(row, b1, casting="unsafe")
-            row *= w
-            row += col
-            # one gather from the uint8 grid (a quarter of the memory an int32 copy would
-            # take, so more of it stays in cache on a large map): the number of near points
-            # and the sum of q, both exact integers
-            q = gathered[:k].reshape(shape)
-            np.take(self.coarse_field, row, out=q)
-            near = n - np.count_nonzero(q == 255, axis=1)
-            spread = q.sum(axis=1, dtype=np.int64) / (255.0 * n)
-            out[sl] = (near - spread / (1.0 + 1.0 / n)) / n
-        return out
-
-    def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
-        """Cc with the floorplan's bilinear f^c lookup."""
-        models = np.asarray(models, dtype=float).reshape(-1, 4)
-        out = np.zeros(len(models))
-        if len(points) == 0:
-            return out
-        for sl in _chunks(len(models), len(points), chunk_size):
-            q = transform_points(models[sl], points)
-            f = self._floorplan().distance(q.reshape(-1, 2)).reshape(q.shape[:2])
-            out[sl] = (f < tau_c).mean(axis=1)
-        return out
-
     def bucket_ranges(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per axis-aligned box (lo, hi: (H, 2)) the bucket columns c0..c1 and rows r0..r1
         it overlaps (clipped to the grid), and whether it lies wholly below / left of it."""
@@ -256,59 +361,84 @@ class FloorplanScorer:
         reach = models[:, 3] * bev.radius
         return centres - reach[:, None], centres + reach[:, None]
 
-    def points_in_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Floorplan wall points in the buckets overlapping each axis-aligned box
-        (lo, hi: (H, 2)): (owner box (P,), point index (P,)). A superset of the points
-        inside each box, which is all the violation test needs."""
-        nr, nc = self.bucket_shape
-        if nr == 0 or len(lo) == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        c0, c1, r0, r1, empty = self.bucket_ranges(lo, hi)
-        n_rows = np.where(empty, 0, r1 - r0 + 1)
-        # one contiguous index range per (box, bucket row)
-        box = np.repeat(np.arange(len(lo)), n_rows)
-        row = r0[box] + (np.arange(n_rows.sum()) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows))
-        begin = self.bucket_start[row * nc + c0[box]]
-        end = self.bucket_start[row * nc + c1[box] + 1]
-        length = end - begin
-        owner = np.repeat(box, length)
-        index = np.repeat(begin - (np.cumsum(length) - length), length) + np.arange(length.sum())
-        return owner, index
+    def coarse_consistency(self, models: np.ndarray, points: np.ndarray, chunk_size: int) -> np.ndarray:
+        """Cc by nearest-cell lookup in the coarse grid (points outside the grid count as
+        far from any wall), with ties broken by closeness: the value is
+        Cc - mean(min(f^c, cap) / cap) / (n + 1) for n points, which orders exactly as
+        (Cc, then smaller mean distance). Many hypotheses of one correspondence cluster
+        reach the same Cc on few points; the tie-break makes the cluster's most precise
+        member its representative, which is the one worth re-scoring and refining.
+        chunk_size is the torch backend's (the loops build no temporaries to bound)."""
+        scorer = self
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0 or len(models) == 0:
+            return out
+        h, w = scorer.shape
+        px = np.ascontiguousarray(points[:, 0], dtype=np.float32)
+        py = np.ascontiguousarray(points[:, 1], dtype=np.float32)
+        # numpy's cos and sin of the same column view coarse_terms takes them of; the rest
+        # of coarse_terms (products, float32 rounding) is done in the kernel
+        c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
+        index_type = np.uint32 if h * w <= 1 << 32 else np.uint64
+        inv, ox, oy = 1.0 / scorer.resolution, float(scorer.origin[0]), float(scorer.origin[1])
 
-    def violation(self, models: np.ndarray, bev: "BevView", tau_v: float, chunk_size: int, per: str = "free") -> np.ndarray:
+        def piece(r):
+            i = slice(*r)
+            _coarse_kernel(models[i], c[i], sn[i], inv, ox, oy, px, py, scorer.coarse_field, h, w, index_type, out[i])
+
+        threads.run(piece, _model_ranges(len(models), len(px)))
+        return out
+
+    def consistency(self, models: np.ndarray, points: np.ndarray, tau_c: float, chunk_size: int) -> np.ndarray:
+        """Cc with the floorplan's bilinear f^c lookup (Floorplan.distance's arithmetic)."""
+        models = np.asarray(models, dtype=float).reshape(-1, 4)
+        out = np.zeros(len(models))
+        if len(points) == 0 or len(models) == 0:
+            return out
+        floorplan = self._floorplan()
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        # transform_points' a and b (numpy's cos and sin)
+        a = models[:, 3] * np.cos(models[:, 2])
+        b = models[:, 3] * np.sin(models[:, 2])
+        h, w = floorplan.shape
+        tx, ty = np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1])
+        px, py = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+        grid = (floorplan._flat_field, h, w, float(floorplan.origin[0]), float(floorplan.origin[1]), float(floorplan.resolution))
+
+        def piece(r):
+            i = slice(*r)
+            return _consistency_kernel(a[i], b[i], tx[i], ty[i], px, py, *grid, float(tau_c), out[i])
+
+        if not all(threads.run(piece, _model_ranges(len(models), len(p)))):
+            raise InputError("points passed to Floorplan.distance contain NaN or inf")
+        return out
+
+    def violation(self, models: np.ndarray, bev, tau_v: float, chunk_size: int, per: str = "free") -> np.ndarray:
         """Cv: floorplan wall points under the mapped BEV footprint, pulled back into the
         BEV by the inverse transform; of those in observed free space (per="free", the
         paper) or in any observed cell, free or wall (per="observed"), the fraction whose
         clearance exceeds tau_v (precomputed per BEV cell in bev.state)."""
+        scorer = self
         models = np.asarray(models, dtype=float).reshape(-1, 4)
         out = np.zeros(len(models))
-        if len(self.wall_points) == 0 or len(models) == 0 or bev.radius <= 0:
+        n_rows, n_cols = scorer.bucket_shape
+        if len(scorer.wall_points) == 0 or len(models) == 0 or bev.radius <= 0 or n_rows == 0:
             return out
-        box_lo, box_hi = self.footprint_boxes(models, bev)
-        step = max(1, chunk_size // max(len(self.wall_points), 1))
+        c0, c1, r0, r1, empty = scorer.bucket_ranges(*scorer.footprint_boxes(models, bev))
+        c, sn = np.cos(models[:, 2]), np.sin(models[:, 2])
+        k = 1.0 / (models[:, 3] * bev.resolution)
         h, w = bev.state.shape
-        flat_state = bev.state.ravel()
-        for lo in range(0, len(models), step):
-            sl = slice(lo, min(lo + step, len(models)))
-            owner, index = self.points_in_boxes(box_lo[sl], box_hi[sl])
-            if len(owner) == 0:
-                continue
-            q = self.wall_points[index]
-            m = models[sl][owner]
-            # inverse transform into BEV cell units: x = R^T (x' - t) / s, then the grid
-            c, sn = np.cos(m[:, 2]), np.sin(m[:, 2])
-            k = 1.0 / (m[:, 3] * bev.resolution)
-            dx, dy = q[:, 0] - m[:, 0], q[:, 1] - m[:, 1]
-            u = (c * dx + sn * dy) * k - bev.origin_cells[0]
-            v = (-sn * dx + c * dy) * k - bev.origin_cells[1]
-            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            cell = np.clip(v, 0, h - 1).astype(np.int64) * w + np.clip(u, 0, w - 1).astype(np.int64)
-            state = np.where(inside, flat_state[cell], 0)
-            n = sl.stop - sl.start
-            seen = (state == FREE) | (state == DEEP_FREE) if per == "free" else state > 0
-            n_free = np.bincount(owner, weights=seen, minlength=n)
-            n_bad = np.bincount(owner, weights=state == DEEP_FREE, minlength=n)
-            out[sl] = np.where(n_free > 0, n_bad / np.maximum(n_free, 1), 0.0)
+        tx, ty = np.ascontiguousarray(models[:, 0]), np.ascontiguousarray(models[:, 1])
+        state = np.ascontiguousarray(bev.state).ravel()
+        ou, ov = float(bev.origin_cells[0]), float(bev.origin_cells[1])
+
+        def piece(r):
+            i = slice(*r)
+            _violation_kernel(tx[i], ty[i], c[i], sn[i], k[i], c0[i], c1[i], r0[i], r1[i], empty[i], scorer.bucket_start, n_cols,
+                              scorer.wall_points, state, h, w, ou, ov, per == "observed", out[i])
+
+        threads.run(piece, threads.ranges(len(models), _MIN_VIOLATION_MODELS_PER_THREAD))
         return out
 
 
@@ -332,24 +462,20 @@ def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
     return scorer
 
 
-def scoring_kernels(floorplan, settings: ScoringSettings, kernels: str = "numpy"):
-    """What computes the scores: the cached FloorplanScorer (backend numpy), the same
-    scorer's data read by compiled loops (backend numpy with estimator.kernels numba,
-    scoring_numba.NumbaScorer), or its tensors on scoring.device (backend torch, built once
-    per scorer and device)."""
+def scoring_kernels(floorplan, settings: ScoringSettings):
+    """What computes the scores, chosen by scoring.backend: the cached FloorplanScorer and
+    its compiled kernels ("numpy": the CPU backend), or its tensors on scoring.device
+    ("torch", built once per scorer and device). Both have coarse_consistency,
+    consistency and violation with the same arguments."""
     scorer = floorplan_scorer(floorplan, settings)
     if settings.backend == "numpy":
-        if kernels == "numba":
-            from .scoring_numba import NumbaScorer  # the optional [fast] extra, imported on first use
-
-            return NumbaScorer(scorer)
         return scorer
-    kernels = scorer._torch_kernels.get(settings.device)
-    if kernels is None:
+    torch_scorer = scorer._torch_kernels.get(settings.device)
+    if torch_scorer is None:
         from .scoring_torch import TorchScorer  # the optional [torch] extra, imported on first use
 
-        kernels = scorer._torch_kernels[settings.device] = TorchScorer(scorer, floorplan, settings.device)
-    return kernels
+        torch_scorer = scorer._torch_kernels[settings.device] = TorchScorer(scorer, floorplan, settings.device)
+    return torch_scorer
 
 
 # --------------------------------------------------------------------------------------
@@ -372,50 +498,6 @@ def sparse_line_points(lines: LineSet, spacing: float, max_points: int | None = 
     return e[owner, 0] + t[:, None] * (e[owner, 1] - e[owner, 0])
 
 
-@dataclass(frozen=True)
-class BevView:
-    """What the scores read from one BEV observation, computed once per localization."""
-
-    wall_points: np.ndarray  # (N, 2)
-    state: np.ndarray  # (H, W) int8: UNSEEN, FREE, DEEP_FREE (clearance > tau_v) or WALL (a BEV wall point's cell)
-    origin_cells: np.ndarray  # (2,) BEV origin in cell units
-    resolution: float
-    centre: np.ndarray  # (2,) centre of a disc covering every free cell
-    radius: float  # its radius (0: no free cell)
-
-    @classmethod
-    def of(cls, obs: BevObservation, tau_v: float) -> BevView:
-        free = np.asarray(obs.free, dtype=bool)
-        # f^v as used here: distance to the nearest cell that is NOT observed free
-        # (occupied or unknown), i.e. min(obs.clearance, depth into the free region).
-        # The paper measures to occupied cells only; but a wall seen at grazing incidence
-        # gets hits far apart while free space reaches it between them, so occupied-only
-        # clearance flags the true wall as a violation. Depth into free space does not.
-        # "depth > tau_v" is an erosion of the free mask by a disc of radius tau_v.
-        r = int(np.floor(tau_v / obs.resolution))
-        yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
-        disc = ((xx * xx + yy * yy) * obs.resolution**2 <= tau_v * tau_v).astype(np.uint8)
-        inner = cv2.erode(free.astype(np.uint8), disc, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-        deep = inner & (np.asarray(obs.clearance) > tau_v)
-        state = free.astype(np.int8)
-        state += deep  # FREE + 1 = DEEP_FREE where deep
-        cells = np.floor((np.asarray(obs.wall_points) - obs.origin) / obs.resolution).astype(np.int64)
-        h, w = state.shape
-        ok = (cells[:, 0] >= 0) & (cells[:, 0] < w) & (cells[:, 1] >= 0) & (cells[:, 1] < h)
-        state[cells[ok, 1], cells[ok, 0]] = WALL
-        # the free cells' bounding box from per-row / per-column flags: the same box as
-        # np.nonzero's indices give, without listing every free cell (~10x cheaper)
-        rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
-        if len(rows):
-            lo = obs.origin + obs.resolution * np.array([cols[0], rows[0]])
-            hi = obs.origin + obs.resolution * np.array([cols[-1] + 1, rows[-1] + 1])
-            centre, radius = 0.5 * (lo + hi), float(0.5 * np.linalg.norm(hi - lo) + obs.resolution)
-        else:
-            centre, radius = np.zeros(2), 0.0
-        origin_cells = np.asarray(obs.origin, dtype=float) / obs.resolution
-        return cls(obs.wall_points, state, origin_cells, float(obs.resolution), centre, radius)
-
-
 # --------------------------------------------------------------------------------------
 # scores and ranking
 # --------------------------------------------------------------------------------------
@@ -430,11 +512,11 @@ class Scores:
     violation: np.ndarray  # Cv
 
 
-def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings: ScoringSettings = ScoringSettings(), kernels: str = "numpy") -> Scores:
+def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings: ScoringSettings = ScoringSettings()) -> Scores:
     """Full C = Cc - Cv of every model on all BEV wall points."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = scoring_kernels(floorplan, settings, kernels)
+    scorer = scoring_kernels(floorplan, settings)
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
     cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size, settings.violation_per)
     return Scores(cc - settings.violation_weight * cv, cc, cv)
@@ -454,29 +536,13 @@ def distinct(models: np.ndarray, anchor: np.ndarray, settings: ScoringSettings, 
     # Greedy suppression in order never looks ahead, so running it on a prefix gives the
     # same first survivors as on the whole list: grow the prefix only when it runs dry.
     block = min(n, max(256, 16 * limit))
+    kept = np.empty(limit, dtype=np.int64)
+    x, y, ang = (np.ascontiguousarray(a) for a in (pos[:, 0], pos[:, 1], ang))
     while True:
-        kept = _greedy_distinct(pos[:block], ang[:block], settings.distinct_translation, max_angle, limit)
-        if len(kept) >= limit or block >= n:
-            return kept
+        count = _greedy_distinct_kernel(x[:block], y[:block], ang[:block], float(settings.distinct_translation), float(max_angle), limit, kept)
+        if count >= limit or block >= n:
+            return kept[:count].copy()
         block = min(n, 4 * block)
-
-
-def _greedy_distinct(pos, ang, max_distance, max_angle, limit) -> np.ndarray:
-    alive = np.ones(len(pos), dtype=bool)
-    kept: list[int] = []
-    while len(kept) < limit:
-        candidates = np.flatnonzero(alive)
-        if len(candidates) == 0:
-            break
-        i = int(candidates[0])
-        kept.append(i)
-        rest = candidates[1:]
-        near = (np.hypot(pos[rest, 0] - pos[i, 0], pos[rest, 1] - pos[i, 1]) < max_distance) & (
-            np.abs(wrap_angle(ang[rest] - ang[i])) < max_angle
-        )
-        alive[i] = False
-        alive[rest[near]] = False
-    return np.array(kept, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -495,22 +561,14 @@ def rank_coarse_to_fine(
     sparse_points: np.ndarray,
     anchor: np.ndarray,
     settings: ScoringSettings = ScoringSettings(),
-    kernels: str = "numpy",
 ) -> Ranking:
     """Coarse Cc on sparse line points for all models, full C on the top_k distinct."""
     models = np.asarray(models, dtype=float).reshape(-1, 4)
     bev = obs if isinstance(obs, BevView) else BevView.of(obs, settings.tau_v)
-    scorer = scoring_kernels(floorplan, settings, kernels)
+    scorer = scoring_kernels(floorplan, settings)
     points = sparse_points if len(sparse_points) else bev.wall_points
     coarse = scorer.coarse_consistency(models, points, settings.chunk_size)
-    if kernels == "numba":
-        # the same indices without sorting every model or posing it (scoring_numba.top_distinct)
-        from .scoring_numba import top_distinct
-
-        top = top_distinct(models, coarse, anchor, settings)
-    else:
-        order = descending(coarse)
-        top = order[distinct(models[order], anchor, settings, settings.top_k)]
-    scores = score_hypotheses(floorplan, bev, models[top], settings, kernels)
+    top = top_distinct(models, coarse, anchor, settings)  # order[distinct(models[order])], order = descending(coarse)
+    scores = score_hypotheses(floorplan, bev, models[top], settings)
     best = descending(scores.total)
     return Ranking(top[best], Scores(scores.total[best], scores.consistency[best], scores.violation[best]), coarse)

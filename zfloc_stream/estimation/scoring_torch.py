@@ -1,14 +1,14 @@
 """The scores of scoring.py in torch (scoring.backend: torch): CUDA when present, CPU otherwise.
 
-Same interface and the same arithmetic as FloorplanScorer's numpy kernels, so the two
-agree to the last bit wherever float operations round alike (torch on CPU, as measured in
-tests/test_scoring_torch.py); on a GPU, fused multiply-adds may move a point that sits on a
-cell boundary to the next cell, so a hypothesis' Cc or Cv may differ by one point in N
-(|difference| <= 1 / N). The per-model trigonometry stays in numpy (float64) and only the
+Same interface and the same element-wise arithmetic as FloorplanScorer's compiled kernels,
+so the two agree to the last bit wherever float operations round alike (torch on CPU, as
+measured in tests/test_scoring_torch.py); the stated tolerance is one point in N: on a GPU,
+fused multiply-adds may move a point that sits on a cell boundary to the next cell, so a
+hypothesis' Cc or Cv may differ by one point in N (|difference| <= 1 / N). The per-model trigonometry stays in numpy (float64) and only the
 (hypotheses x points) work runs in torch, where a GPU scores many more hypotheses per round.
 
 Cv differs in how it finds the floorplan wall points under a hypothesis' footprint: the
-numpy path gathers them bucket by bucket; here every model reads every wall point, masked
+compiled kernel reads them bucket by bucket; here every model reads every wall point, masked
 by the same buckets, which selects exactly the same points and suits a GPU.
 """
 
@@ -17,7 +17,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..torch_support import choose_device, require_torch
-from .scoring import _CACHE_CHUNK, DEEP_FREE, FREE, _chunks, transform_points
+from .views import DEEP_FREE, FREE, transform_points
+
+_CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk
+
+
+def _chunks(n_models: int, n_points: int, chunk_size: int):
+    """Slices of the models, at most chunk_size (models x points) elements each: bounds
+    the tensors a chunk builds."""
+    step = max(1, chunk_size // max(n_points, 1))
+    for lo in range(0, n_models, step):
+        yield slice(lo, min(lo + step, n_models))
 
 
 def _gather(flat, index):
@@ -61,9 +71,9 @@ class TorchScorer:
         field = self._coarse
         px = self._tensor(np.asarray(points[:, 0], dtype=np.float32), torch.float32)
         py = self._tensor(np.asarray(points[:, 1], dtype=np.float32), torch.float32)
-        # the model terms in numpy float64 -> float32, exactly as the numpy kernel makes them
+        # the model terms in numpy float64 -> float32, exactly as the compiled kernel makes them
         terms = self._tensor(np.stack(self.scorer.coarse_terms(models), axis=1), torch.float32)
-        # chunks bound the device memory; on CPU, cache-sized ones as the numpy path uses
+        # chunks bound the device memory; on CPU, cache-sized ones
         chunk_size = chunk_size if self.device.type == "cuda" else min(chunk_size, _CACHE_CHUNK)
         sums, nears = [], []
         for sl in _chunks(len(models), n, chunk_size):
@@ -111,7 +121,7 @@ class TorchScorer:
 
     # ---- Cv ------------------------------------------------------------------------------
     def violation(self, models: np.ndarray, bev, tau_v: float, chunk_size: int, per: str = "free") -> np.ndarray:
-        """FloorplanScorer.violation, every wall point masked by the buckets the numpy path
+        """FloorplanScorer.violation, every wall point masked by the buckets the compiled kernel
         gathers (the ones overlapping the box around the mapped footprint)."""
         torch = self.torch
         scorer = self.scorer

@@ -32,13 +32,16 @@ import cv2
 import numpy as np
 
 from .. import threads
+from ..circle_fitting import circle_clusters, fit_circles
 from ..config import Settings
 from ..errors import ConfigError, FrameError, InputError
 from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
-from ..geometry import CircleSet, LineSet
+from ..geometry import as_points
 from ..observation import BevObservation
+from ..primitives import extract_lines
 from ..rng import make_rng
 from ..sim2 import Sim2
+from . import bev_grids
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
 from .scan_match import match_scan
@@ -438,40 +441,43 @@ class BevSnapshot:
         self.settings = settings
 
     def observation(self, rng: np.random.Generator) -> BevObservation:
-        if self.settings.estimator.kernels == "numba":
-            return self._observation_numba(rng)
+        """The cropped grids (known cells plus bev.crop_margin), the wall points, the free
+        mask, the clearance f^v and the primitives. The grid passes are compiled
+        (bev_grids.py: the element-wise tests in two passes, the clearance in a third
+        around OpenCV's exact distance transform), so no full-grid temporaries are built."""
         b = self.settings.bev
         n = self.logodds.shape[0]
-        wall = wall_cells(self.wall, self.hits, self.logodds, b)
-        known = (self.logodds != 0) | (self.wall > 0)
-        if b.memory_frames:  # cells no recent frame touched are unknown again
-            recent = self.seen > self.stamp - b.memory_frames
-            wall &= recent
-            known &= recent
-        if not wall.any():
+        occupied, free_threshold = np.float32(b.occupied_threshold), np.float32(b.free_threshold)
+        use_recent = bool(b.memory_frames)
+        oldest = self.stamp - b.memory_frames
+        grids = (self.logodds, self.wall, self.hits, self.seen)
+        any_wall, r_lo, r_hi, c_lo, c_hi = bev_grids.known_extent(
+            *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)
+        if not any_wall:
             raise InputError("BEV has no wall points yet")
-        rows, cols = np.nonzero(known.any(axis=1))[0], np.nonzero(known.any(axis=0))[0]
         m = int(np.ceil(b.crop_margin / b.resolution))
-        r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, n)
-        c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, n)
-        lo = self.logodds[r0:r1, c0:c1]
-        wall = wall[r0:r1, c0:c1]
-        free = lo < b.free_threshold
-        occupied = (lo > b.occupied_threshold) | wall
-        if b.memory_frames:
-            free &= recent[r0:r1, c0:c1]
-            occupied &= recent[r0:r1, c0:c1]
-        clearance = exact_distance_cells(~occupied)
-        clearance *= b.resolution  # in place: the same bits as np.where(free, d * resolution, 0.0)
-        clearance[~free] = 0.0
+        r0, r1 = max(r_lo - m, 0), min(r_hi + m + 1, n)
+        c0, c1 = max(c_lo - m, 0), min(c_hi + m + 1, n)
         origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
-        wr, wc = np.nonzero(wall)
-        points = origin + (np.stack([wc, wr], axis=1) + 0.5) * b.resolution
-        return self._with_primitives(points, origin, free, clearance, rng)
+        free, not_occupied, points = bev_grids.crop_masks(
+            *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
+            use_recent, oldest, origin[0], origin[1], b.resolution)
+        prim = self.settings.primitives
 
-    def _with_primitives(self, points, origin, free, clearance, rng: np.random.Generator) -> BevObservation:
-        """The observation of the cropped grids, with the lines and circles of its wall points."""
-        lines, circles = _extract_primitives(points, self.settings, rng)
+        def free_clearance():
+            distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+            return bev_grids.clearance(distance, free, b.resolution)
+
+        # Three independent jobs on the round's threads (threads.py), longest first: the
+        # circles' clustering takes no random numbers, so it runs beside the line
+        # extraction, whose draws come first; the circle fits
+        # draw after it. The same observation as one thread gives.
+        clusters, lines, clearance = threads.run(lambda job: job(), [
+            lambda: circle_clusters(as_points(points), prim.circles),
+            lambda: extract_lines(points, prim.lines, rng),
+            free_clearance,
+        ])
+        circles = fit_circles(clusters, prim.circles, rng)
         return self._observation(points, origin, free, clearance, lines, circles)
 
     def _observation(self, points, origin, free, clearance, lines, circles) -> BevObservation:
@@ -486,75 +492,8 @@ class BevSnapshot:
             trajectory=self.trajectory,
         )
 
-    def _observation_numba(self, rng: np.random.Generator) -> BevObservation:
-        """observation() with the grid passes compiled (bev_numba): the same observation,
-        bit for bit (the same element-wise tests, the same cv2 distance transform)."""
-        from . import bev_numba
-
-        b = self.settings.bev
-        n = self.logodds.shape[0]
-        occupied, free_threshold = np.float32(b.occupied_threshold), np.float32(b.free_threshold)
-        use_recent = bool(b.memory_frames)
-        oldest = self.stamp - b.memory_frames
-        grids = (self.logodds, self.wall, self.hits, self.seen)
-        any_wall, r_lo, r_hi, c_lo, c_hi = bev_numba.known_extent(
-            *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)
-        if not any_wall:
-            raise InputError("BEV has no wall points yet")
-        m = int(np.ceil(b.crop_margin / b.resolution))
-        r0, r1 = max(r_lo - m, 0), min(r_hi + m + 1, n)
-        c0, c1 = max(c_lo - m, 0), min(c_hi + m + 1, n)
-        origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
-        free, not_occupied, points = bev_numba.crop_masks(
-            *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
-            use_recent, oldest, origin[0], origin[1], b.resolution)
-        from ..circles_numba import circle_clusters, fit_circles
-        from ..primitives import as_points, extract_lines
-
-        prim = self.settings.primitives
-
-        def free_clearance():
-            distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-            return bev_numba.clearance(distance, free, b.resolution)
-
-        # Three independent jobs on the round's threads (threads.py), longest first: the
-        # circles' clustering takes no random numbers, so it runs beside the line
-        # extraction, whose draws come first as in _extract_primitives; the circle fits
-        # draw after it. The same observation as one thread gives.
-        clusters, lines, clearance = threads.run(lambda job: job(), [
-            lambda: circle_clusters(as_points(points), prim.circles),
-            lambda: extract_lines(points, prim.lines, rng, kernels="numba"),
-            free_clearance,
-        ])
-        circles = fit_circles(clusters, prim.circles, rng)
-        return self._observation(points, origin, free, clearance, lines, circles)
-
-
-
-def exact_distance_cells(mask: np.ndarray) -> np.ndarray:
-    """Euclidean distance (float64, in cells) from each True cell of mask to the nearest
-    False cell: scipy's distance_transform_edt, bit for bit, 3-5x faster. OpenCV's exact
-    transform (DIST_MASK_PRECISE) returns float32 sqrt(k) for an integer squared distance
-    k; rounding its square recovers k exactly while k < 2^22 (2,048 cells, 102 m at 5 cm),
-    and float64 sqrt(k) is what scipy returns. Farther out k may be off by one (one part
-    in 2^22); f^v is only compared with tau_v (at most 10 m)."""
-    d = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(np.float64)
-    np.multiply(d, d, out=d)  # in place: no full-grid temporaries
-    np.rint(d, out=d)
-    return np.sqrt(d, out=d)
-
 
 def _increment(counts: np.ndarray, flat: np.ndarray) -> None:
     """counts.flat[flat] += 1, saturating (uint16)."""
     view = counts.reshape(-1)
     view[flat] = np.minimum(view[flat].astype(np.int64) + 1, np.iinfo(counts.dtype).max)
-
-
-def _extract_primitives(points: np.ndarray, settings: Settings, rng: np.random.Generator):
-    try:
-        from ..primitives import extract_circles, extract_lines
-    except ImportError:  # primitives module not available: alignment has no primitives
-        return LineSet.empty(), CircleSet.empty()
-    lines = extract_lines(points, settings.primitives.lines, rng, kernels=settings.estimator.kernels)
-    circles = extract_circles(points, settings.primitives.circles, rng, kernels=settings.estimator.kernels)
-    return lines, circles

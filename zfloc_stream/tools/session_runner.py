@@ -16,7 +16,6 @@ from ..drops import DropCounter
 from ..errors import InputError
 from ..estimate import STATUSES, Estimate
 from ..floorplan import Floorplan
-from ..localizer import Localizer
 from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
@@ -115,6 +114,8 @@ def run_session(
     from contextlib import ExitStack
 
     out_dir = prepare_out_dir(out_dir)
+    from ..localizer import Localizer  # here: the compiled kernels (numba) load only once inputs are valid
+
     localizer = Localizer(floorplan, settings, perception)
     if perception is not None:
         frames = perception.stream(frames)

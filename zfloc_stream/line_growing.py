@@ -1,27 +1,21 @@
-"""Compiled line extraction (estimator.kernels: numba; the [fast] extra): the whole seed
-loop of primitives.extract_lines (seeded region growing) in one kernel.
+"""Line extraction by seeded region growing (primitives.extract_lines), compiled: the whole
+seed loop in one kernel.
 
-The algorithm, the random numbers (rng.permutation(n), drawn in Python) and the order of
-every floating-point operation are the numpy path's:
+A random unused seed (the order: rng.permutation(n), drawn in Python) gives, by PCA on its
+neighbourhood, an initial line; the line then collects every still-free point within
+inlier_distance of it that is connected to the seed along the line (no gap longer than
+gap), is refitted by total least squares and grows again until its support stops
+changing. Growth runs inside a local window first (most seeds end there: short fragments,
+noise); only a line that reaches the window's rim regrows over all free points.
 
-- Neighbourhoods: cKDTree.query_ball_point(return_sorted=False) returns the points of the
-  ball in the order of the tree's `indices` (a depth-first walk, smaller half first, over
-  leaves that are consecutive runs of `indices`). The kernel scans the same `indices`
-  order in blocks of _BLOCK, skipping a block whose bounding box is out of reach, and
-  tests each point with scipy's arithmetic (dx*dx + dy*dy <= r*r): the same points in the
-  same order (checked on all 86,294 queries of the real-building BEVs; scipy adds a
-  subtree without testing its points only when its box lies inside the ball, which could
-  differ from the per-point test only at the last bit).
-- Sums: a centroid is the row-by-row sum numpy's axis-0 reduction does; the products
-  numpy hands to OpenBLAS are computed the way OpenBLAS's x86-64 kernels do (fused
-  multiply-adds, the scatter matrix q.T @ q accumulated in blocks of _BLAS_K_BLOCK rows),
-  see _dot, _row_dot and _pca_line.
+Neighbourhoods: the points are sorted once into grid cells (row-major, cell side
+neighbourhood_radius) and scanned in blocks of _BLOCK consecutive points, a block skipped
+when its bounding box is out of reach; each point is tested as dx*dx + dy*dy <= r*r.
 
-What differs: np.arctan2 (SVML on AVX-512 machines) and libm's atan2, used here, disagree
-in the last bit for about 2% of arguments, and BLAS kernels on other CPUs may round
-differently. A line direction can then differ by ~1e-16, so endpoints, normals and offsets
-agree with the numpy path to ~1e-15 rather than bit for bit; the lines themselves (count,
-support, order) are the same unless a point sits within rounding of a threshold.
+Determinism: every sum runs in a fixed order (plain IEEE operations, no fastmath), so a
+machine gives the same lines bit for bit run after run. Another machine (another libm
+atan2) may differ in the last bits of a direction: the same lines (count, support, order)
+unless a point sits within rounding of a threshold, coordinates within ~1e-12 m.
 """
 
 from __future__ import annotations
@@ -29,55 +23,27 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .geometry import LineSet
-from .numba_support import njit, require_numba
+from .numba_support import njit
 
-_numba = require_numba()
-from llvmlite import ir  # noqa: E402  (numba's own dependency)
-from numba.core import cgutils  # noqa: E402
-from numba.extending import intrinsic  # noqa: E402
-
-_BLOCK = 16  # points per bounding box of the neighbourhood scan (cKDTree's leaf size)
-_BLAS_K_BLOCK = 384  # OpenBLAS's GEMM_Q (x86-64 double): rows per partial sum of q.T @ q
-
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a * b + c rounded once (llvm.fma: exact on every CPU, in hardware where it exists)."""
-    sig = _numba.float64(_numba.float64, _numba.float64, _numba.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
-        return builder.call(fn, args)
-
-    return sig, codegen
+_BLOCK = 16  # points per bounding box of the neighbourhood scan
 
 
 @njit
 def _dot(x0, x1, y0, y1):
-    """numpy's x @ y for two 2-vectors (OpenBLAS ddot): x1*y1 fused onto x0*y0."""
-    return _fma(x1, y1, x0 * y0)
-
-
-@njit
-def _row_dot(x0, x1, y0, y1):
-    """One entry of numpy's (m, 2) @ (2,) for m >= 2 (OpenBLAS dgemv): x0*y0 fused onto x1*y1."""
-    return _fma(x0, y0, x1 * y1)
+    """x . y for two 2-vectors."""
+    return x0 * y0 + x1 * y1
 
 
 @njit
 def _pca_line(xy, idx, m):
-    """primitives._pca_line of the rows xy[idx[:m]]: (cx, cy, dx, dy). The centroid sums rows
-    in order from the first (numpy's axis-0 sum); q.T @ q is what numpy's syrk call returns
-    on OpenBLAS x86-64: per _BLAS_K_BLOCK-row block a fused multiply-add chain from 0, the
-    blocks added in order (the last 2*Q rows or fewer split into two halves, the larger
-    first, as OpenBLAS's level-3 driver does)."""
-    sx = xy[idx[0], 0]
-    sy = xy[idx[0], 1]
-    for k in range(1, m):
+    """Centroid and unit direction (cx, cy, dx, dy) of the total-least-squares line through
+    the rows xy[idx[:m]]: the principal direction of the scatter matrix in closed form
+    (a symmetric 2x2 matrix: faster than an eigensolver)."""
+    sx = 0.0
+    sy = 0.0
+    for k in range(m):
         sx += xy[idx[k], 0]
         sy += xy[idx[k], 1]
     cx = sx / m
@@ -85,26 +51,12 @@ def _pca_line(xy, idx, m):
     a = 0.0
     b = 0.0
     d = 0.0
-    start = 0
-    while start < m:
-        size = m - start
-        if size >= 2 * _BLAS_K_BLOCK:
-            size = _BLAS_K_BLOCK
-        elif size > _BLAS_K_BLOCK:
-            size = (size + 1) // 2
-        pa = 0.0
-        pb = 0.0
-        pd = 0.0
-        for k in range(start, start + size):
-            qx = xy[idx[k], 0] - cx
-            qy = xy[idx[k], 1] - cy
-            pa = _fma(qx, qx, pa)
-            pb = _fma(qx, qy, pb)
-            pd = _fma(qy, qy, pd)
-        a += pa
-        b += pb
-        d += pd
-        start += size
+    for k in range(m):
+        qx = xy[idx[k], 0] - cx
+        qy = xy[idx[k], 1] - cy
+        a += qx * qx
+        b += qx * qy
+        d += qy * qy
     angle = 0.5 * math.atan2(2.0 * b, a - d)
     return cx, cy, math.cos(angle), math.sin(angle)
 
@@ -130,7 +82,7 @@ def _blocks(pos_xy):
 
 @njit
 def _free_ball(pos_xy, tree_index, lo, hi, qx, qy, r2, taken, out):
-    """Points within sqrt(r2) of (qx, qy) that are not taken, in cKDTree order (see the
+    """Points within sqrt(r2) of (qx, qy) that are not taken, in the grid order (see the
     module docstring), written to out; returns their count. A block is skipped only when
     its box's squared distance exceeds r2, which (rounding being monotone) no point inside
     it can undercut."""
@@ -147,7 +99,7 @@ def _free_ball(pos_xy, tree_index, lo, hi, qx, qy, r2, taken, out):
                 continue
             dx = pos_xy[k, 0] - qx
             dy = pos_xy[k, 1] - qy
-            if dx * dx + dy * dy <= r2:  # scipy's squared distance and test
+            if dx * dx + dy * dy <= r2:
                 out[count] = i
                 count += 1
     return count
@@ -155,8 +107,12 @@ def _free_ball(pos_xy, tree_index, lo, hi, qx, qy, r2, taken, out):
 
 @njit
 def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, max_iter, tol, rim, use_rim):
-    """primitives._grow over the first pn rows of pool_xy, from the rows init_xy[init_idx[:init_m]]:
-    the converged support (sorted row indices), or an empty array for None."""
+    """The line grown over the first pn rows of pool_xy from the rows init_xy[init_idx[:init_m]],
+    anchored at the seed (the run of collinear points nearest it): the converged support
+    (sorted row indices), or an empty array when nothing grows. Converged: the support
+    stopped changing, or the refit moved the line by less than tol over the support's
+    extent. With use_rim, growth also stops, unconverged, once the support reaches farther
+    than rim from the seed (the caller regrows it over all free points)."""
     none = np.empty(0, np.int64)
     cx, cy, dx, dy = _pca_line(init_xy, init_idx, init_m)
     previous = none
@@ -168,18 +124,18 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
         cn = _dot(cx, cy, nx, ny)
         nc = 0
         for k in range(pn):
-            if abs(_row_dot(pool_xy[k, 0], pool_xy[k, 1], nx, ny) - cn) <= inlier:
+            if abs(_dot(pool_xy[k, 0], pool_xy[k, 1], nx, ny) - cn) <= inlier:
                 cand[nc] = k
                 nc += 1
         if nc < 2:
             return none
         cd = _dot(cx, cy, dx, dy)
         for k in range(nc):
-            t[k] = _row_dot(pool_xy[cand[k], 0], pool_xy[cand[k], 1], dx, dy) - cd
+            t[k] = _dot(pool_xy[cand[k], 0], pool_xy[cand[k], 1], dx, dy) - cd
         t_seed = _dot(seed_x - cx, seed_y - cy, dx, dy)
-        # _connected_run: the run (consecutive spacing <= gap) of sorted t holding the
-        # value nearest t_seed (numpy's stable sort; order among ties cannot change the
-        # run, whose indices are sorted below)
+        # the run (consecutive spacing <= gap) of sorted t holding the value nearest
+        # t_seed (a stable sort; order among ties cannot change the run, whose indices
+        # are sorted below)
         order = np.argsort(t[:nc], kind="mergesort")
         ts = t[:nc][order]
         k = np.searchsorted(ts, t_seed)
@@ -218,8 +174,8 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
 
 @njit
 def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, gap, max_iter, tol, min_points, min_length):
-    """The seed loop of primitives.extract_lines: (normals, offsets, endpoints, support) of
-    the accepted lines in the order found (unsorted)."""
+    """The seed loop: (normals, offsets, endpoints, support) of the accepted lines in the
+    order found (unsorted). tree_index: the points in grid order (_grid_order)."""
     n = pts.shape[0]
     pos_xy = np.empty((n, 2))
     for k in range(n):
@@ -271,14 +227,15 @@ def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, g
         t_min = np.inf
         t_max = -np.inf
         for i in members:
-            t = _row_dot(pts[i, 0] - cx, pts[i, 1] - cy, dx, dy)
+            t = _dot(pts[i, 0] - cx, pts[i, 1] - cy, dx, dy)
             t_min = min(t_min, t)
             t_max = max(t_max, t)
         if m < min_points or t_max - t_min < min_length:
             tried[members] = True  # a fragment: stays free, seeds no more
             tried[neigh[:nn]] = True
             continue
-        # _canonical: direction into the upper half plane
+        # canonical: the direction into the upper half plane, so the same wall gives the
+        # same parameters whichever way it was grown
         if dy < 0 or (dy == 0 and dx < 0):
             dx, dy, t_min, t_max = -dx, -dy, -t_max, -t_min
         normals[found, 0] = -dy
@@ -302,19 +259,24 @@ def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, g
     return normals[:found].copy(), offsets[:found].copy(), ends[:found].copy(), counts[:found].copy()
 
 
+def _grid_order(pts: np.ndarray, cell: float) -> np.ndarray:
+    """The points' indices sorted by grid cell (row-major, side `cell`), then by index: runs
+    of consecutive points are spatially compact, so the blocks' boxes prune well."""
+    cells = np.floor((pts - pts.min(axis=0)) / max(cell, 1e-9)).astype(np.int64)
+    return np.lexsort((np.arange(len(pts)), cells[:, 0], cells[:, 1]))
+
+
 def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSet:
-    """primitives.extract_lines(kernels="numba") on checked points pts (N, 2): the same
-    lines in the same order, the same random numbers drawn (see the module docstring for
-    the last-bit differences)."""
+    """Lines of checked points pts (N, 2) (primitives.as_points), longest first; takes
+    rng.permutation(n) from rng."""
     n = len(pts)
     if n < max(settings.min_points, 2):
         return LineSet.empty()
     pts = np.ascontiguousarray(pts, dtype=np.float64)
-    tree = cKDTree(pts)
     perm = rng.permutation(n)
     s = settings
     normals, offsets, ends, support = _extract(
-        pts, perm.astype(np.int64), tree.indices.astype(np.int64),
+        pts, perm.astype(np.int64), _grid_order(pts, s.neighbourhood_radius),
         s.neighbourhood_radius * s.neighbourhood_radius, s.local_radius * s.local_radius, s.min_seed_neighbours,
         s.local_radius - s.gap, s.inlier_distance, s.gap, s.max_grow_iterations, s.converge_tolerance,
         s.min_points, s.min_length)

@@ -1,27 +1,19 @@
-"""Compiled circle extraction (estimator.kernels: numba; the [fast] extra): the group
-filter and the per-cluster work of primitives.extract_circles.
+"""Circle (pillar) extraction (primitives.extract_circles), compiled around two library calls.
 
-What stays in Python: cKDTree.query_pairs (the link pairs) and sklearn's HDBSCAN, so the
-candidate points and the clusters are the numpy path's exactly, and the random numbers:
-each cluster's RANSAC triplets are drawn with rng.integers(0, m, size=(iterations, 3)) in
-the numpy path's order, before the kernel runs.
+In Python: the link pairs of the points (cKDTree.query_pairs) and sklearn's HDBSCAN, and the
+random numbers: each cluster's RANSAC triplets are drawn with rng.integers(0, m,
+size=(iterations, 3)), in cluster order, before the kernel runs.
 
-What is compiled: the connected components of the link pairs (union-find: the same
-partition as scipy's connected_components), the group bounding boxes, and per cluster the
-whole of primitives._circle_in_cluster (3-point RANSAC, Gauss-Newton refits, inlier ratio,
-angular coverage and span, the two-line test). Every operation is the numpy path's, in its
-order: the RANSAC circumcircles, residuals and inlier counts, the Gauss-Newton steps
-(np.linalg.lstsq inside numba calls the same LAPACK gelsd with numpy's rcond), the
-pairwise summation numpy's np.sum uses, the sequential axis-0 sums and cumulative sums.
+Compiled: the connected components of the link pairs (union-find), the groups no wider
+than a pillar (a group wider than a pillar of max_radius, a wall or a room, cannot hold an
+isolated circle, so it is dropped before HDBSCAN, which keeps clustering cheap), and per
+cluster a 3-point RANSAC circle, Gauss-Newton refits (LAPACK's lstsq), the inlier ratio,
+and acceptance only if the inliers wrap far enough around the centre (angular coverage)
+without long holes (angular span), and fit no two lines better (a corner).
 
-What differs: np.arctan2 (SVML on AVX-512 machines) and libm's atan2, used here, may
-disagree in the last bit; the angles only enter the coverage/span comparisons and the
-angular order (a stable sort here; numpy's sort orders exact ties of angles arbitrarily),
-so the same circles come out unless an angle sits within rounding of a threshold. Where
-numba's LAPACK (scipy's) rounds as numpy's, the centres and radii are then the numpy
-path's bit for bit: measured on 300 synthetic scenes (310 circles, every one bit for bit)
-and on the 29 rounds of benchmarks/profile_round.py's default cases (whose BEVs hold no
-pillar: the same empty sets). The tests allow 1e-9 m.
+Determinism: fixed operation orders, so the same circles bit for bit on one machine;
+elsewhere libm's atan2 or LAPACK may round differently in the last bits, which moves a
+centre by ~1e-12 m and changes a decision only for an angle within rounding of a threshold.
 """
 
 from __future__ import annotations
@@ -30,14 +22,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import sklearn
-from scipy.spatial import cKDTree
-from sklearn.cluster import HDBSCAN
 
 from .geometry import CircleSet
 from .numba_support import njit
 
-_TWO_PI = 2 * np.pi  # the numpy path's 2 * np.pi
+_TWO_PI = 2 * np.pi
 _EPS = float(np.finfo(np.float64).eps)
 
 
@@ -51,10 +40,9 @@ def _root(parent, i):
 
 @njit
 def _groups(pts, pairs, max_width, min_size):
-    """primitives._candidate_groups: (keep, group) with keep the indices of the points in
-    groups (connected components of the link pairs) no wider than max_width and holding at
-    least min_size points, in index order, and group their component labels (0..G-1 in
-    order of first appearance; the numpy path's labels differ, the partition is the same)."""
+    """(keep, group): keep the indices of the points in groups (connected components of the
+    link pairs) no wider than max_width and holding at least min_size points, in index
+    order, and group their component labels (0..G-1 in order of first appearance)."""
     n = pts.shape[0]
     parent = np.arange(n)
     for k in range(pairs.shape[0]):
@@ -150,73 +138,8 @@ def _work_sizes(sub, labels, group, n_groups, n_clusters, max_width):
 
 
 @njit
-def _block_sum(a, lo, n):
-    """numpy's pairwise_sum for n <= 128: 8 accumulators, combined as a tree."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    while i < n - n % 8:
-        r0 += a[lo + i]
-        r1 += a[lo + i + 1]
-        r2 += a[lo + i + 2]
-        r3 += a[lo + i + 3]
-        r4 += a[lo + i + 4]
-        r5 += a[lo + i + 5]
-        r6 += a[lo + i + 6]
-        r7 += a[lo + i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
-@njit
-def _pairwise_sum(a):
-    """np.sum(a) bit for bit for a 1-D float64 array: numpy's pairwise summation (blocks
-    of at most 128 summed by _block_sum; a longer run splits at half, rounded down to a
-    multiple of 8, and adds its halves). The recursion runs on an explicit stack: numba's
-    on-disk cache crashes on recursive functions."""
-    depth = 64
-    lo = np.empty(depth, np.int64)
-    size = np.empty(depth, np.int64)
-    phase = np.zeros(depth, np.int64)
-    left = np.empty(depth)
-    top = 0
-    lo[0] = 0
-    size[0] = a.shape[0]
-    ret = 0.0
-    while top >= 0:
-        n = size[top]
-        half = n // 2
-        half -= half % 8
-        if n <= 128:
-            ret = _block_sum(a, lo[top], n)
-            top -= 1
-        elif phase[top] == 0:  # sum the left half first
-            phase[top] = 1
-            top += 1
-            lo[top], size[top], phase[top] = lo[top - 1], half, 0
-        elif phase[top] == 1:  # then the right half
-            left[top] = ret
-            phase[top] = 2
-            top += 1
-            lo[top], size[top], phase[top] = lo[top - 1] + half, n - half, 0
-        else:
-            ret = left[top] + ret
-            top -= 1
-    return ret
-
-
-@njit
 def _residual(x, y, cx, cy, r):
-    """|norm((x, y) - c) - r| as numpy's np.linalg.norm(axis=...) computes it."""
+    """|norm((x, y) - c) - r|."""
     dx = x - cx
     dy = y - cy
     return abs(math.sqrt(dx * dx + dy * dy) - r)
@@ -224,7 +147,8 @@ def _residual(x, y, cx, cy, r):
 
 @njit
 def _fit_circle(p, inliers, cx, cy, r, iterations):
-    """primitives._fit_circle on the rows p[inliers] (Gauss-Newton, lstsq steps)."""
+    """Geometric least-squares circle of the rows p[inliers] (Gauss-Newton on |p - c| - r,
+    lstsq steps) from the start (cx, cy, r)."""
     m = 0
     for i in range(p.shape[0]):
         if inliers[i]:
@@ -238,7 +162,7 @@ def _fit_circle(p, inliers, cx, cy, r, iterations):
             m += 1
     J = np.empty((m, 3))
     b = np.empty(m)
-    rcond = _EPS * max(m, 3)  # numpy's rcond=None
+    rcond = _EPS * max(m, 3)  # numpy's default cut-off for small singular values
     for _ in range(iterations):
         for i in range(m):
             dx = q[i, 0] - cx
@@ -258,9 +182,9 @@ def _fit_circle(p, inliers, cx, cy, r, iterations):
 
 
 @njit
-def _coverage_and_span(angles, max_gap):
-    """primitives.angular_coverage_and_span, the same operations (np.mod as numpy's
-    npy_divmod, the span as a difference of cumulative sums)."""
+def angular_coverage_and_span(angles, max_gap):
+    """(2*pi minus the largest gap between consecutive angles, longest contiguous span whose
+    consecutive gaps are all < max_gap), both in radians (angles taken mod 2*pi)."""
     n = angles.shape[0]
     if n < 2:
         return 0.0, 0.0
@@ -301,7 +225,8 @@ def _coverage_and_span(angles, max_gap):
 
 @njit
 def _best_two_line_sse(p, min_part):
-    """primitives._best_two_line_sse (sequential axis-0 sums and cumulative sums, as numpy)."""
+    """Smallest total squared orthogonal residual of two lines fitted to a prefix and the
+    remaining suffix of the ordered points p (every split point, by cumulative sums)."""
     n = p.shape[0]
     if n < 2 * min_part:
         return np.inf
@@ -347,14 +272,15 @@ def _line_sse(m):
     a = sxx - sx * sx / cnt
     b = sxy - sx * sy / cnt
     d = syy - sy * sy / cnt
-    # numpy's (a - d) ** 2 is a square
     return max(0.5 * (a + d) - math.sqrt(0.25 * ((a - d) * (a - d)) + b * b), 0.0)
 
 
 @njit
 def _circle_in_cluster(p, context, idx, inlier, min_r, max_r, refit_rounds, refit_iterations,
                        min_size, min_ratio, max_gap, min_coverage, min_span):
-    """primitives._circle_in_cluster with the triplets idx drawn: (found, cx, cy, r)."""
+    """RANSAC (the triplets idx drawn) + refit a circle on the points p; accept it only if it
+    explains the context points (radius, inlier ratio, angular coverage and continuity,
+    no better pair of lines): (found, cx, cy, r)."""
     m = p.shape[0]
     best = -1
     cx = cy = r = 0.0
@@ -408,7 +334,7 @@ def _circle_in_cluster(p, context, idx, inlier, min_r, max_r, refit_rounds, refi
             arc[k, 1] = context[i, 1]
             angles[k] = math.atan2(context[i, 1] - cy, context[i, 0] - cx)
             k += 1
-    coverage, span = _coverage_and_span(angles, max_gap)
+    coverage, span = angular_coverage_and_span(angles, max_gap)
     if coverage < min_coverage or span < min_span:
         return False, 0.0, 0.0, 0.0
     # _angular_order: counter-clockwise from after the largest gap
@@ -430,7 +356,7 @@ def _circle_in_cluster(p, context, idx, inlier, min_r, max_r, refit_rounds, refi
         dy = arc[o, 1] - cy
         e = math.sqrt(dx * dx + dy * dy) - r
         sq[i] = e * e
-    if _best_two_line_sse(ordered, 3) <= _pairwise_sum(sq):
+    if _best_two_line_sse(ordered, 3) <= np.sum(sq):
         return False, 0.0, 0.0, 0.0
     return True, cx, cy, r
 
@@ -480,8 +406,13 @@ def circle_clusters(pts: np.ndarray, settings) -> CircleClusters | None:
     s = settings
     if len(pts) < s.min_cluster_size:
         return None
+    # here, not at import: scipy.spatial and scikit-learn cost ~1 s to import
+    import sklearn
+    from scipy.spatial import cKDTree
+    from sklearn.cluster import HDBSCAN
+
     pts = np.ascontiguousarray(pts, dtype=np.float64)
-    max_width = 2 * s.max_radius + 2 * s.inlier_distance  # the numpy path's expression
+    max_width = 2 * s.max_radius + 2 * s.inlier_distance
     pairs = cKDTree(pts).query_pairs(s.group_link_distance, output_type="ndarray").astype(np.int64)
     keep, group = _groups(pts, pairs.reshape(-1, 2), max_width, s.min_cluster_size)
     if len(keep) < s.min_cluster_size:
@@ -509,7 +440,7 @@ def fit_circles(clusters: CircleClusters | None, settings, rng: np.random.Genera
     s = settings
     if clusters is None:
         return CircleSet.empty()
-    # the numpy path's draws: one block per cluster that is not too wide, in cluster order
+    # the draws: one block per cluster that is not too wide, in cluster order
     blocks = [rng.integers(0, m, size=(s.ransac_iterations, 3)) for m in clusters.sizes.tolist() if m >= 0]
     if not blocks:
         return CircleSet.empty()
@@ -525,6 +456,5 @@ def fit_circles(clusters: CircleClusters | None, settings, rng: np.random.Genera
 
 
 def extract_circles(pts: np.ndarray, settings, rng: np.random.Generator) -> CircleSet:
-    """primitives.extract_circles(kernels="numba") on checked points pts (N, 2): the same
-    circles in the same order from the same random numbers (see the module docstring)."""
+    """Circles of checked points pts (N, 2) (primitives.as_points)."""
     return fit_circles(circle_clusters(pts, settings), settings, rng)

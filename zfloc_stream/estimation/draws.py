@@ -1,8 +1,10 @@
-"""Compiled loops of the hybrid RANSAC (estimator.kernels: numba; the [fast] extra).
+"""The hybrid RANSAC's draws, compiled: which floorplan tuples each BEV sample meets, and
+the admissible BEV / floorplan line triplets.
 
-Integer index arithmetic only, so the results equal the numpy path exactly. The draw of
-one table row (_draw_row) is shared with the fused draw-and-solve kernels of
-solvers_numba, which call it from their own loops."""
+For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b) uniform
+draws (with replacement) from its n_b candidates. Integer index arithmetic only (exact).
+The draw of one table row (draw_row) is shared with the fused draw-and-solve kernels of
+solvers.py, which call it from their own loops."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from ..numba_support import njit
 
 
 @njit
-def _cumulate(sizes, b, cum):
+def cumulate(sizes, b, cum):
     """cum[r] = sizes[b, 0] + ... + sizes[b, r] (the running count of query b's
     candidates up to range r, integers: exact); returns n_b."""
     n = 0
@@ -23,16 +25,16 @@ def _cumulate(sizes, b, cum):
 
 
 @njit
-def _draw_row(starts, sizes, cum, b, n, uniform):
-    """The table row of one draw for query b with n > 0 candidates, cum from _cumulate:
-    uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1), as the numpy path)
+def draw_row(starts, sizes, cum, b, n, uniform):
+    """The table row of one draw for query b with n > 0 candidates, cum from cumulate:
+    uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1))
     and mapped to starts[b, r] + u - (cum[b, r] - sizes[b, r]), r the range holding u: the
     number of cumulative counts <= u, as numpy's searchsorted(side="right") finds it
     (counted without branches: which range a random draw lands in is unpredictable).
 
-    NB solvers_numba's fused kernels call this function and numba's disk cache does not
-    notice a change in another file: after editing it, delete solvers_numba's cached
-    kernels (__pycache__/solvers_numba.*.nbi / .nbc)."""
+    NB solvers.py's fused kernels call this function and numba's disk cache does not
+    notice a change in another file: after editing it, delete solvers' cached kernels
+    (__pycache__/solvers.*.nbi / .nbc)."""
     u = np.int64(uniform * n)  # truncation, as numpy's astype(int64) of a non-negative value
     if u > n - 1:
         u = n - 1
@@ -45,23 +47,23 @@ def _draw_row(starts, sizes, cum, b, n, uniform):
 @njit
 def _draw_rows(starts, sizes, counts, uniform):
     """For each query b, counts[b] draws, uniform[j] mapped to its table row by
-    _draw_row. Returns (query, row) per draw."""
+    draw_row. Returns (query, row) per draw."""
     total = uniform.shape[0]
     query = np.empty(total, np.int64)
     row = np.empty(total, np.int64)
     cum = np.empty(sizes.shape[1], np.int64)
     j = 0
     for b in range(starts.shape[0]):
-        n = _cumulate(sizes, b, cum)
+        n = cumulate(sizes, b, cum)
         for _ in range(counts[b]):
             query[j] = b
-            row[j] = _draw_row(starts, sizes, cum, b, n, uniform[j])
+            row[j] = draw_row(starts, sizes, cum, b, n, uniform[j])
             j += 1
     return query, row
 
 
 def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator):
-    """What ransac._draw takes from rng, taken the same way: the number of draws per query
+    """What a draw takes from rng: the number of draws per query
     (ceil(fraction * n_b), at least one where n_b > 0) and one uniform per draw (none, and
     nothing taken from rng, when there are no draws). Also starts and sizes as contiguous
     int64, as the kernels take them."""
@@ -73,7 +75,8 @@ def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: n
 
 
 def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """ransac._draw compiled: the same random numbers drawn from rng, the same (query, row)."""
+    """(query, table row) of every draw: ceil(fraction * n_b) uniform draws (with
+    replacement) from query b's n_b candidates."""
     starts, sizes, k, uniform = draw_uniforms(starts, sizes, fraction, rng)
     if len(uniform) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
@@ -82,11 +85,10 @@ def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.
 
 @njit
 def _admissible_triplets(indptr, indices, parallel, lengths):
-    """ransac._ordered_triplets of the CSR neighbour lists (rows (i, j, k), j != k both
+    """The ordered triplets of the CSR neighbour lists (rows (i, j, k), j != k both
     neighbours of i, j-major in list order) without those whose j and k are both parallel
-    to i: the rows BevSamples keeps, in the same order. Counted first, so the table is one
-    allocation (the numpy path builds it per line and filters a copy). Also each row's
-    sampling weight, the shortest of its three lines' lengths (exact: a minimum)."""
+    to i. Counted first, so the table is one allocation. Also each row's sampling weight,
+    the shortest of its three lines' lengths (exact: a minimum)."""
     n = indptr.shape[0] - 1
     total = 0
     for i in range(n):
@@ -116,11 +118,9 @@ def _admissible_triplets(indptr, indices, parallel, lengths):
 
 
 def admissible_triplets(neighbours, alpha: np.ndarray, max_angle: float, lengths: np.ndarray):
-    """BevSamples' triplet table compiled: the same (T, 3) int64 rows in the same order,
-    and their weights (lengths[rows].min(axis=1)).
-    The parallel test is ransac._parallel_mod_pi's arithmetic on every (i, j) pair at once,
-    alpha[i] - alpha[j] and numpy's sin on a contiguous array, as the numpy path applies it
-    to the contiguous differences of its gathered triplets: the same booleans."""
+    """The 3L triplet table of a line set (BEV samples, floorplan tuples): (T, 3) int64
+    rows, a line and two of its neighbours, not all parallel (within max_angle, mod pi,
+    ransac._parallel_mod_pi's test), and their weights (lengths[rows].min(axis=1))."""
     n = len(neighbours)
     if n == 0:
         return np.zeros((0, 3), dtype=np.int64), np.zeros(0)

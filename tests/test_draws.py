@@ -1,0 +1,164 @@
+"""The hybrid RANSAC's compiled draws (estimation/draws.py) and the fused draw-and-solve
+of 3L / 2L samples (solvers.py): what a draw returns, what it takes from the random
+stream, the triplet table's definition, and the models' invariants."""
+
+import math
+
+import numpy as np
+import pytest
+
+from zfloc_stream.estimation import ransac
+from zfloc_stream.estimation.draws import admissible_triplets, draw
+
+from types import SimpleNamespace
+
+from zfloc_stream.config import Settings
+from zfloc_stream.geometry import CircleSet, LineSet
+
+
+def _scene(seed, n_bev=24, clutter=150):
+    """BEV lines and a floorplan holding them moved by one Sim(2) (normals of either
+    sign) among clutter, with degenerate lines in both (exact axis normals, repeated
+    normals: parallel samples, zero and huge offsets), random floorplan neighbours.
+    Returns (BEV samples as _models_3l / _models_2l read them, FloorplanMatches)."""
+    gen = np.random.default_rng(seed)
+    a = gen.uniform(-np.pi, np.pi, n_bev)
+    a[::2] = np.round(a[::2] / (np.pi / 2)) * (np.pi / 2)  # exact axis normals (cosines 0, +-1)
+    bev_n = np.column_stack([np.cos(a), np.sin(a)])
+    bev_n[-3:] = bev_n[0]  # repeated normals
+    bev_d = gen.normal(0, 6, n_bev)
+    bev_d[-2:] = [0.0, 1.7e308]
+    theta, s, t = gen.uniform(-np.pi, np.pi), gen.uniform(0.9, 1.1), gen.normal(0, 5, 2)
+    rot = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    moved = bev_n @ rot.T
+    sign = np.where(gen.random(n_bev) < 0.5, -1.0, 1.0)
+    c = gen.uniform(-np.pi, np.pi, clutter)
+    fp_n = np.vstack([moved * sign[:, None], np.column_stack([np.cos(c), np.sin(c)])])
+    with np.errstate(over="ignore"):
+        fp_d = np.concatenate([(s * bev_d - moved @ t) * sign, gen.normal(0, 8, clutter)])
+    n_fp = len(fp_d)
+    fp_lines = LineSet(fp_n, fp_d, np.zeros((n_fp, 2, 2)))
+    neighbours = [np.flatnonzero(gen.random(n_fp) < 0.06) for _ in range(n_fp)]
+    neighbours = [nb[nb != i] for i, nb in enumerate(neighbours)]
+    floorplan = SimpleNamespace(lines=fp_lines, circles=CircleSet.empty(), line_neighbours=neighbours)
+    solvers = Settings().estimator.solvers
+    fp = ransac.FloorplanMatches(floorplan, solvers)
+    bev_lines = LineSet(bev_n, bev_d, np.zeros((n_bev, 2, 2)))
+    triplets = gen.integers(0, n_bev, (400, 3))
+    pairs = gen.integers(0, n_bev, (300, 2))
+    bev = SimpleNamespace(lines=bev_lines, alpha=ransac._normal_angles(bev_lines), triplets=triplets, pairs=pairs,
+                          triplet_p=ransac._probabilities(gen.random(len(triplets))), pair_p=None)
+    return bev, fp
+
+
+def _estimator(mode, fraction):
+    cfg = Settings().estimator
+    solvers = cfg.solvers
+    if mode == "prior":  # the bounds localize sets at a prior of 1
+        solvers = solvers.model_copy(update={"min_scale": 1 / 1.15, "max_scale": 1.15})
+    return cfg.model_copy(update={"scale_mode": mode, "solvers": solvers,
+                                  "ransac": cfg.ransac.model_copy(update={"match_fraction": fraction})})
+
+
+def _assert_same_bits(got, ref):
+    assert got.shape == ref.shape and got.dtype == ref.dtype == np.float64
+    assert np.array_equal(got.view(np.int64), ref.view(np.int64))  # -0.0 for +0.0 fails too
+
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_draw_meets_ceil_fraction_of_each_querys_candidates_inside_its_ranges(seed):
+    gen = np.random.default_rng(seed)
+    queries, ranges = int(gen.integers(0, 300)), int(gen.choice([1, 3, 9]))
+    # empty ranges and whole empty queries included
+    sizes = gen.integers(0, 50, (queries, ranges)) * (gen.random((queries, ranges)) < 0.7)
+    starts = gen.integers(0, 10_000, (queries, ranges))
+    fraction = float(gen.choice([0.03, 0.5, 1.0]))
+    q, row = draw(starts, sizes, fraction, np.random.default_rng(seed))
+    n = sizes.sum(axis=1)
+    expected = [max(math.ceil(fraction * k), 1) if k else 0 for k in n]
+    assert np.array_equal(np.bincount(q, minlength=queries), expected) and np.all(np.diff(q) >= 0)
+    inside = (row[:, None] >= starts[q]) & (row[:, None] < starts[q] + sizes[q])
+    assert inside.any(axis=1).all()
+    again = draw(starts, sizes, fraction, np.random.default_rng(seed))
+    assert np.array_equal(again[0], q) and np.array_equal(again[1], row)
+
+
+def test_a_draw_takes_one_uniform_per_draw_from_the_stream():
+    sizes, starts = np.array([[3, 0, 5]]), np.array([[10, 20, 30]])
+    a, b = np.random.default_rng(4), np.random.default_rng(4)
+    q, _ = draw(starts, sizes, 1.0, a)
+    b.random(len(q))
+    assert a.random() == b.random()
+
+
+def test_draw_with_no_candidates():
+    q, row = draw(np.zeros((4, 9), np.int64), np.zeros((4, 9), np.int64), 0.03, np.random.default_rng(0))
+    assert len(q) == 0 and len(row) == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("mode, fraction", [("free", 0.03), ("prior", 1.0), ("fixed", 0.5)])
+def test_fused_line_models_are_finite_within_the_scale_bounds_and_repeatable(seed, mode, fraction):
+    bev, fp = _scene(seed)
+    cfg = _estimator(mode, fraction)
+    a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+    for solve in (lambda rng: ransac._models_3l(bev, fp, 700, cfg, rng), lambda rng: ransac._models_2l(bev, fp, 600, cfg, rng, 1.05)):
+        got, again = solve(a), solve(b)
+        _assert_same_bits(got, again)
+        assert len(got) > 20 and np.isfinite(got).all()
+        assert np.all(np.abs(got[:, 2]) <= np.pi)
+        if mode == "fixed":
+            assert np.all(got[:, 3] == 1.0)
+        else:
+            assert np.all((got[:, 3] >= cfg.solvers.min_scale) & (got[:, 3] <= cfg.solvers.max_scale))
+    assert a.random() == b.random()
+
+
+def test_fused_without_candidates():
+    """BEV samples whose angles match no floorplan tuple: no draw, no model, and (at a
+    prior) the zero-size noise draw; the generator is left as it was."""
+    from zfloc_stream.estimation.solvers import drawn_2l, drawn_3l
+
+    bev, fp = _scene(0)
+    starts, sizes = np.zeros((5, 9), np.int64), np.zeros((5, 9), np.int64)
+    cfg = _estimator("prior", 0.03)
+    a, b = np.random.default_rng(1), np.random.default_rng(1)
+    models, source = drawn_3l(starts, sizes, 0.03, a, bev.triplets[:5], fp.triplets.rows, bev.lines, fp.lines,
+                              ransac._line_angles(bev.lines), fp.line_angles, cfg.solvers)
+    assert models.shape == (0, 4) and len(source) == 0
+    models, _ = drawn_2l(starts[:, :3], sizes[:, :3], 0.03, a, bev.pairs[:5], fp.pairs.rows, bev.lines, fp.lines,
+                         ransac._line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "prior")
+    assert models.shape == (0, 4)
+    assert a.random() == b.random()
+
+
+def _random_lines(gen, n, angle_choices):
+    """n segments, directions drawn from angle_choices (repeats: exactly parallel lines)
+    plus some just inside / outside the parallel threshold, scattered over 20 m."""
+    from zfloc_stream.geometry import LineSet
+
+    angles = gen.choice(angle_choices, n) + gen.choice([0.0, 0.0, 1e-9, -1e-9, 0.3, 5.0], n) * np.pi / 180
+    centres = gen.uniform(-10, 10, (n, 2))
+    half = gen.uniform(0.3, 3.0, n)[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    return LineSet.from_endpoints(np.stack([centres - half, centres + half], axis=1))
+
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_triplet_table_is_every_ordered_non_parallel_triplet_of_neighbours(seed):
+    gen = np.random.default_rng(seed)
+    n = int(gen.choice([0, 1, 2, 3, 12, 40]))
+    lines = _random_lines(gen, n, np.deg2rad([0.0, 90.0, 45.0, 2.0, 178.0]))
+    alpha = ransac._normal_angles(lines)
+    par = np.deg2rad(5.0)
+    neighbours = [np.flatnonzero((gen.random(n) < 0.3) & (np.arange(n) != i)) for i in range(n)]
+    rows, weights = admissible_triplets(neighbours, alpha, par, lines.lengths)
+
+    def parallel(i, j):
+        return abs(math.sin(alpha[i] - alpha[j])) < math.sin(par)
+
+    expected = [(i, j, k) for i, nb in enumerate(neighbours) for j in nb for k in nb
+                if j != k and not (parallel(i, j) and parallel(i, k))]
+    assert rows.dtype == np.int64 and [tuple(r) for r in rows] == expected
+    assert np.array_equal(weights, lines.lengths[rows].min(axis=1) if len(rows) else np.zeros(0))
