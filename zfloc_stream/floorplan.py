@@ -212,6 +212,8 @@ def _distance_field(occupied: np.ndarray, resolution: float) -> np.ndarray:
     free = np.ascontiguousarray(~occupied, dtype=np.uint8)
     cells = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     if float(cells.max()) >= 2048.0:
+        from scipy import ndimage  # here: ~0.25 s that a CLI error must not pay
+
         return ndimage.distance_transform_edt(~occupied, sampling=resolution)
     squared = np.rint(np.square(cells, dtype=np.float64))
     return np.sqrt(squared) * resolution
@@ -221,6 +223,8 @@ def blob_spans(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(labels, span): 8-connected blobs of occupied cells (labels 1..count, 0 = free) and
     each label's bounding-box side in cells (span[0] = 0). All blobs at once: a cluttered
     map has ~10^5 of them, too many for a loop."""
+    from scipy import ndimage  # here: ~0.25 s that a CLI error must not pay
+
     labels, count = ndimage.label(occupied, structure=np.ones((3, 3), dtype=bool))
     span = np.zeros(count + 1, dtype=np.int64)
     if count:
@@ -485,8 +489,6 @@ class Floorplan:
 
     @cached_property
     def circles(self) -> CircleSet:
-        from scipy import ndimage
-
         from .primitives import extract_circles  # compiled (numba): imported when first needed
 
         cfg = self.settings
