@@ -88,7 +88,7 @@ def test_torch_backend_without_torch_is_one_clear_error(world, monkeypatch):
     scorer = floorplan_scorer(fp, ScoringSettings())
     monkeypatch.setattr(scorer, "_torch_kernels", {})
     monkeypatch.setitem(sys.modules, "torch", None)  # import torch now raises ImportError
-    with pytest.raises(BackboneError, match=r"scoring.backend torch needs the optional \[torch\] extra"):
+    with pytest.raises(BackboneError, match=r"estimator.scoring.backend: torch needs the optional \[torch\] extra"):
         scoring_kernels(fp, ScoringSettings(backend="torch"))
 
 
@@ -104,5 +104,5 @@ def test_the_scorer_backend_is_chosen_when_the_localizer_is_built(world, monkeyp
     fp, _, _ = world
     monkeypatch.setattr(floorplan_scorer(fp, ScoringSettings()), "_torch_kernels", {})
     monkeypatch.setitem(sys.modules, "torch", None)
-    with pytest.raises(BackboneError, match=r"scoring.backend torch needs the optional \[torch\] extra"):
+    with pytest.raises(BackboneError, match=r"estimator.scoring.backend: torch needs the optional \[torch\] extra"):
         Localizer(fp, load_settings(overrides=["estimator.scoring.backend=torch"]))

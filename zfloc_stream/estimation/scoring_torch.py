@@ -40,7 +40,7 @@ class TorchScorer:
     """A FloorplanScorer's data as tensors on one device, with its three kernels."""
 
     def __init__(self, scorer, floorplan, device: str = "auto"):
-        torch = self.torch = require_torch("scoring.backend torch")
+        torch = self.torch = require_torch("estimator.scoring.backend: torch")
         self.device = choose_device(torch, device, "scoring.device")
         self.scorer = scorer
         self.shape = scorer.shape
