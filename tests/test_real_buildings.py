@@ -130,3 +130,45 @@ def test_real_building_benchmark_ci_subset():
     assert row["success"] and row["ref_success"], row
     assert row["first_pose_frame"] == Settings().localizer.every_k_frames - 1  # a pose from round 1
     assert "### laser" in eval_real.table([row], [20], True)
+
+
+def _eval_real():
+    import sys
+
+    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("eval_real", module)  # its dataclass looks its module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_eval_real_status_table_counts_tracking_frames_off_by_1m_or_more():
+    eval_real = _eval_real()
+    rows = [{"frame_status": ["initializing", "tracking", "tracking", "tracking", "lost"],
+             "frame_errors": [None, 0.2, 0.999, 1.0, 3.0]}]
+    table = eval_real.status_table(rows)
+    assert "| tracking | 3 | 66.7% | 33.3% | 1 |" in table  # 1.0 m exactly counts as off
+    assert "| initializing | 1 | 0.0% | 100.0% | 1 |" in table  # no pose: off
+    assert "| ambiguous | 0 | - | - | 0 |" in table
+
+
+def test_eval_real_conditions_change_only_what_they_name():
+    from zfloc_stream.frames import FLOOR, WALL, CameraFrame
+
+    eval_real = _eval_real()
+    assert eval_real.drift_overrides(1.0) == []
+    assert "datasets.odometry.noise=0.06" in eval_real.drift_overrides(3.0)[0]
+    assert eval_real.camera_settings(eval_real.Conditions(drift=3.0)).odom_yaw_noise_deg == pytest.approx(0.9)
+    labels = np.full((6, 8), WALL, dtype=np.uint8)
+    labels[4:] = FLOOR  # border between rows 3 and 4
+    band = eval_real._border_band(labels)
+    assert band[2:6].all() and not band[:2].any()
+    depth = np.full((6, 8), 4.0, dtype=np.float32)
+    frame = CameraFrame(depth, labels, np.array([[4.0, 0, 4], [0, 4.0, 3], [0, 0, 1]]), np.eye(4), 0.0)
+    scaled = eval_real.monocular_frames([frame], eval_real.Conditions(depth_scale_error=0.1), 0, "intel", 0)[0]
+    factor = scaled.depth[0, 0] / 4.0
+    assert 0.9 <= factor <= 1.1 and factor != 1.0 and np.allclose(scaled.depth, 4.0 * factor)
+    assert (scaled.labels == labels).all()
+    flipped = eval_real.monocular_frames([frame], eval_real.Conditions(label_noise=1.0), 0, "intel", 0)[0]
+    assert (flipped.labels[2:4] == FLOOR).all() and (flipped.labels[4:6] == WALL).all() and (flipped.labels[:2] == WALL).all()
+    assert (flipped.depth == depth).all()
