@@ -12,6 +12,7 @@ import pytest
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
 from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.frames import LaserFrame
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
 from zfloc_stream.tools.cli import main as cli_main
@@ -172,3 +173,24 @@ def test_eval_real_conditions_change_only_what_they_name():
     flipped = eval_real.monocular_frames([frame], eval_real.Conditions(label_noise=1.0), 0, "intel", 0)[0]
     assert (flipped.labels[2:4] == FLOOR).all() and (flipped.labels[4:6] == WALL).all() and (flipped.labels[:2] == WALL).all()
     assert (flipped.depth == depth).all()
+
+
+def test_eval_real_whole_walk_metrics_and_splicing():
+    eval_real = _eval_real()
+    assert eval_real.kidnap_order(9, False) == [(0, 9)]
+    assert eval_real.kidnap_order(9, True) == [(0, 3), (6, 9), (3, 6)]
+    statuses = ["initializing", "tracking", "tracking", "lost", "lost", "tracking", "tracking"]
+    errors = np.array([np.inf, 0.1, 0.2, 5.0, 5.0, 3.0, 0.1])
+    m = eval_real.walk_metrics(statuses, errors, cuts=[3])
+    assert m["first_fix"] == 1 and m["within_1m"] == pytest.approx(3 / 6)
+    assert (m["off_runs"], m["longest_off"], m["recovery"]) == (1, 3, [3])
+    assert eval_real.walk_metrics(["lost"] * 3, errors[:3], [])["first_fix"] is None
+
+    def scan(x):
+        T = np.eye(4)
+        T[0, 3] = x
+        return LaserFrame(np.ones(4), 0.0, 0.5, 0.1, 10.0, T, 0.0)
+
+    frames, cuts = eval_real.spliced([[scan(0.0), scan(1.0)], [scan(50.0), scan(52.0)]])
+    assert cuts == [2]
+    assert [f.T_odom_sensor[0, 3] for f in frames] == [0.0, 1.0, 1.0, 3.0]  # no motion across the cut
