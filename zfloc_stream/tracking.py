@@ -415,7 +415,7 @@ class HypothesisTracker:
         spike or jump lands here), or the pose jumped (pose_jumped).
 
         confidence in [0, 1], for a caller to threshold: the reported mode's share of the
-        bank's weight, scaled by how far it is confirmed (hits / confirm_rounds, at most
+        bank's weight, scaled by how far it is confirmed (hits / rounds_to_track, at most
         1), and 0 on a frame whose evidence contradicts it. nan before any mode.
         """
         best = self.best
@@ -424,7 +424,7 @@ class HypothesisTracker:
             return self._status, float("nan")
         contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
         status: Status = "lost" if contradicted and self._status == "tracking" else self._status
-        confirmation = min(1.0, best.hits / self.settings.confirm_rounds)
+        confirmation = min(1.0, best.hits / self.rounds_to_track())
         return status, 0.0 if contradicted else float(best.weight * confirmation)
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:
