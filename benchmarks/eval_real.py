@@ -216,6 +216,24 @@ def status_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+CONFIDENCE_LEVELS = (0.5, 0.9, 0.99)
+
+
+def confidence_table(rows: list[dict]) -> str:
+    """Per frame: how often a pose whose Estimate.confidence reaches a level is within 1 m
+    (what a caller thresholding the confidence instead of the status meets)."""
+    conf, errors = [], []
+    for r in rows:
+        conf += [np.nan if v is None else v for v in r.get("frame_confidence", [])]
+        errors += [np.inf if v is None else v for v in r.get("frame_errors", [])]
+    conf, errors = np.array(conf, dtype=float), np.array(errors, dtype=float)
+    lines = ["| confidence | frames | within 1 m |", "|---|---|---|"]
+    for level in CONFIDENCE_LEVELS:
+        mine = conf >= level  # nan (no pose, or an older localizer) never reaches a level
+        lines.append(f"| >= {level:g} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} |")
+    return "\n".join(lines)
+
+
 def reference_row(floorplan, points, frames, yaw_of) -> dict:
     """The exact correlative search on all points at once, judged like the localizer."""
     t0 = time.perf_counter()
@@ -325,6 +343,7 @@ def _pct(values, digits: int = 0) -> str:
 def table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     return "\n\n".join(f"### {sensor}\n\n" + sensor_table([r for r in rows if r["sensor"] == sensor], lengths, reference)
                        + "\n\nPer frame:\n\n" + status_table([r for r in rows if r["sensor"] == sensor])
+                       + "\n\n" + confidence_table([r for r in rows if r["sensor"] == sensor])
                        for sensor in dict.fromkeys(r["sensor"] for r in rows))
 
 
