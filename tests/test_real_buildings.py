@@ -124,9 +124,7 @@ INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" /
 def test_real_building_benchmark_ci_subset():
     """One held-out Intel window through benchmarks/eval_real.py, online and reference
     (the full table: python benchmarks/eval_real.py)."""
-    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
-    eval_real = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(eval_real)
+    eval_real = _eval_real()
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
     assert row["success"] and row["ref_success"], row
     assert row["first_pose_frame"] == Settings().localizer.every_k_frames - 1  # a pose from round 1
