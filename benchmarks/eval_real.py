@@ -220,7 +220,7 @@ CONFIDENCE_LEVELS = (0.5, 0.9, 0.99)
 
 
 def confidence_table(rows: list[dict]) -> str:
-    """Per frame: how often a pose whose Estimate.confidence reaches a level is within 1 m
+    """Per frame: how often a pose whose Estimate.confidence exceeds a level is within 1 m
     (what a caller thresholding the confidence instead of the status meets)."""
     conf, errors = [], []
     for r in rows:
@@ -229,8 +229,8 @@ def confidence_table(rows: list[dict]) -> str:
     conf, errors = np.array(conf, dtype=float), np.array(errors, dtype=float)
     lines = ["| confidence | frames | within 1 m |", "|---|---|---|"]
     for level in CONFIDENCE_LEVELS:
-        mine = conf >= level  # nan (no pose, or an older localizer) never reaches a level
-        lines.append(f"| >= {level:g} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} |")
+        mine = conf > level  # nan (no pose, or an older localizer) never exceeds a level
+        lines.append(f"| > {level:g} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} |")
     return "\n".join(lines)
 
 

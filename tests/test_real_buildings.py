@@ -151,7 +151,7 @@ def test_eval_real_status_table_counts_tracking_frames_off_by_1m_or_more():
     assert "| ambiguous | 0 | - | - | 0 |" in table
     rows[0]["frame_confidence"] = [None, 0.95, 0.5, 0.2, 0.0]
     confidence = eval_real.confidence_table(rows)
-    assert "| >= 0.5 | 2 | 100.0% |" in confidence and "| >= 0.9 | 1 | 100.0% |" in confidence
+    assert "| > 0.5 | 1 | 100.0% |" in confidence and "| > 0.9 | 1 | 100.0% |" in confidence
 
 
 def test_eval_real_conditions_change_only_what_they_name():
