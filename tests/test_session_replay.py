@@ -4,6 +4,7 @@ divergence reports and clean failures on bad input."""
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
@@ -230,12 +231,19 @@ def test_a_changed_decision_is_a_divergence_at_its_frame(recorded, tmp_path, cap
     from zfloc_stream.config import load_settings
 
     changed = load_settings(overrides=["tracking.confirm_rounds=4"])
-    base = [e.status for e in record_laser_session(tmp_path / "a.mcap", N)]
-    other = [e.status for e in record_laser_session(tmp_path / "b.mcap", N, settings=changed)]
-    first = next(i for i, (a, b) in enumerate(zip(base, other, strict=True)) if a != b)
+    base = record_laser_session(tmp_path / "a.mcap", N)
+    other = record_laser_session(tmp_path / "b.mcap", N, settings=changed)
+    first_status = next(i for i, (a, b) in enumerate(zip(base, other, strict=True)) if a.status != b.status)
+    # the confidence counts confirmations too, so it may differ first (a number, not a decision)
+    first = next(i for i, (a, b) in enumerate(zip(base, other, strict=True))
+                 if a.status != b.status or not np.isclose(a.confidence, b.confidence, equal_nan=True))
     assert main([str(recorded), "--check", "--set", "tracking.confirm_rounds=4"]) == 1
     out = capsys.readouterr().out
-    assert f"DIVERGED at frame {first}, /zfloc/status: status: logged {base[first]!r}, replay {other[first]!r}" in out, out
+    if first == first_status:
+        line = f"status: logged {base[first].status!r}, replay {other[first].status!r}"
+    else:
+        line = f"confidence: logged {base[first].confidence!r}, replay {other[first].confidence!r}"
+    assert f"DIVERGED at frame {first}, /zfloc/status: {line}" in out, out
 
 
 def test_a_swapped_mode_order_is_a_decision(tmp_path, capsys):
