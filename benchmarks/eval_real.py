@@ -223,6 +223,24 @@ def status_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+CONFIDENCE_LEVELS = (0.5, 0.9, 0.99)
+
+
+def confidence_table(rows: list[dict]) -> str:
+    """Per frame: how often a pose whose Estimate.confidence exceeds a level is within 1 m
+    (what a caller thresholding the confidence instead of the status meets)."""
+    conf, errors = [], []
+    for r in rows:
+        conf += [np.nan if v is None else v for v in r.get("frame_confidence", [])]
+        errors += [np.inf if v is None else v for v in r.get("frame_errors", [])]
+    conf, errors = np.array(conf, dtype=float), np.array(errors, dtype=float)
+    lines = ["| confidence | frames | within 1 m |", "|---|---|---|"]
+    for level in CONFIDENCE_LEVELS:
+        mine = conf > level  # nan (no pose, or an older localizer) never exceeds a level
+        lines.append(f"| > {level:g} | {int(mine.sum())} | {_pct(errors[mine] < 1.0, 1)} |")
+    return "\n".join(lines)
+
+
 def reference_row(floorplan, points, frames, yaw_of) -> dict:
     """The exact correlative search on all points at once, judged like the localizer."""
     t0 = time.perf_counter()
@@ -404,6 +422,7 @@ def _pct(values, digits: int = 0) -> str:
 def table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     return "\n\n".join(f"### {sensor}\n\n" + sensor_table([r for r in rows if r["sensor"] == sensor], lengths, reference)
                        + "\n\nPer frame:\n\n" + status_table([r for r in rows if r["sensor"] == sensor])
+                       + "\n\n" + confidence_table([r for r in rows if r["sensor"] == sensor])
                        for sensor in dict.fromkeys(r["sensor"] for r in rows))
 
 
@@ -452,6 +471,81 @@ def _map(fn, jobs: list, workers: int) -> list:
     return [fn(*job) for job in jobs]
 
 
+# --- whole walks (issue 26): a log from its first scan to its last, online ---------------------
+def kidnap_order(n: int, kidnap: bool) -> list[tuple[int, int]]:
+    """The log's scan ranges in the order they are played. kidnap: thirds played first,
+    last, middle, so the robot is carried twice between far-apart places while its
+    odometry says it stood still."""
+    if not kidnap:
+        return [(0, n)]
+    a, b = n // 3, 2 * n // 3
+    return [(0, a), (b, n), (a, b)]
+
+
+def spliced(segments: list[list]) -> tuple[list, list[int]]:
+    """Laser frames of consecutive segments, each later segment's odometry re-anchored so
+    that its first pose equals the previous segment's last (a kidnap: no odometry motion
+    across the cut). Returns the frames and the index of each cut."""
+    frames, cuts = list(segments[0]), []
+    for segment in segments[1:]:
+        anchor = frames[-1].T_odom_sensor @ np.linalg.inv(segment[0].T_odom_sensor)
+        cuts.append(len(frames))
+        frames += [dataclasses.replace(f, T_odom_sensor=anchor @ f.T_odom_sensor) for f in segment]
+    return frames, cuts
+
+
+def walk_metrics(statuses: list[str], errors: np.ndarray, cuts: list[int]) -> dict:
+    """After the first `tracking` frame: the share of frames within 1 m, the runs of frames
+    1 m or more off (count, longest), and per kidnap the frames until the pose is
+    `tracking` and within 1 m again (None: never)."""
+    first = next((i for i, s in enumerate(statuses) if s == "tracking"), None)
+    if first is None:
+        return {"first_fix": None, "within_1m": 0.0, "off_runs": 0, "longest_off": len(errors), "recovery": [None] * len(cuts)}
+    off = errors[first:] >= 1.0
+    runs, current = [], 0
+    for o in off:
+        current = current + 1 if o else 0
+        if o and current == 1:
+            runs.append(0)
+        if o:
+            runs[-1] = current
+    recovery = []
+    for cut in cuts:
+        back = next((k for k in range(cut, len(errors)) if statuses[k] == "tracking" and errors[k] < 1.0), None)
+        recovery.append(None if back is None else back - cut)
+    return {"first_fix": first, "within_1m": float(np.mean(~off)), "off_runs": len(runs), "longest_off": max(runs, default=0),
+            "recovery": recovery}
+
+
+def whole_log_row(log: str, seed: int, overrides: list[str], kidnap: bool) -> dict:
+    """One shared laser log played whole (or spliced: kidnap_order) against the map of the
+    whole log (the self-map: this measures continuity, not recognition), with drift."""
+    path = DATA / f"{log}-corrected.log.gz"
+    settings = load_settings(overrides=list(overrides), base_overrides={"estimator": {"scale_mode": "fixed"}})
+    settings = settings.model_copy(update={"seed": seed})
+    seq = carmen_sequence(path, settings)
+    floorplan = map_from_log(load_log(path, settings), [], settings)
+    order = kidnap_order(seq.n_frames, kidnap)
+    frames, cuts = spliced([list(seq.frames(a, b)) for a, b in order])
+    result, _ = localize_frames(floorplan, frames, settings)
+    errors = np.array([np.inf if v is None else v for v in result["frame_errors"]])
+    truth = np.array([f.ground_truth[:2] for f in frames])
+    jumps = [float(np.linalg.norm(truth[c] - truth[c - 1])) for c in cuts]
+    return {"log": log, "sensor": "laser", "frames": len(frames), "kidnap_m": jumps, "seconds": result["seconds"],
+            "frame_status": result["frame_status"], "frame_errors": result["frame_errors"],
+            **walk_metrics(result["frame_status"], errors, cuts)}
+
+
+def whole_log_table(rows: list[dict]) -> str:
+    lines = ["| log | frames | first fix | within 1 m after it | runs 1 m+ off (longest) | kidnaps: metres -> frames to recover | s |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        kid = ", ".join(f"{m:.0f} m -> {'never' if k is None else k}" for m, k in zip(r["kidnap_m"], r["recovery"])) or "-"
+        lines.append(f"| {r['log']} | {r['frames']} | {r['first_fix']} | {100 * r['within_1m']:.1f}% | {r['off_runs']} ({r['longest_off']}) | "
+                     f"{kid} | {r['seconds']:.0f} |")
+    return "\n".join(lines) + "\n\nPer frame:\n\n" + status_table(rows)
+
+
 def add_condition_options(parser: argparse.ArgumentParser) -> None:
     """The harder conditions of issue 26 (see Conditions)."""
     group = parser.add_argument_group("conditions (what real users bring)")
@@ -465,6 +559,10 @@ def add_condition_options(parser: argparse.ArgumentParser) -> None:
                        help="camera: depth noise growing with range, std N * depth^2")
     group.add_argument("--label-noise", type=float, default=0.0, metavar="P",
                        help="camera: pixels within 2 px of a wall/floor border take the other label with probability P")
+    group.add_argument("--whole-log", action="store_true",
+                       help="instead of windows: each laser log from its first scan to its last, against the map of the whole log")
+    group.add_argument("--kidnap", action="store_true",
+                       help="with --whole-log: play each log's thirds first, last, middle (two kidnaps), odometry standing still across the cuts")
 
 
 def parse_conditions(parser: argparse.ArgumentParser, args) -> Conditions:
@@ -529,6 +627,15 @@ def main(argv=None) -> int:
         status = plan_style_main(args, jobs, lengths)
         print(f"\n{len(jobs)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
         return status
+    if args.whole_log or args.kidnap:
+        if args.camera or args.no_laser:
+            parser.error("--whole-log / --kidnap play the laser logs: drop --camera / --no-laser")
+        rows = _map(whole_log_row, [(log, args.seed, args.set, args.kidnap) for log in logs], args.workers)
+        print(f"Conditions: {conditions.describe()}{', kidnapped' if args.kidnap else ''}\n")
+        print(whole_log_table(rows))
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
+        return 0
     if args.drift_free:
         rows = _map(drift_free_row, list(dict.fromkeys(j[:3] for j in jobs)), args.workers)
         print("| drift-free exact search | " + " | ".join(f"#{L}" for L in lengths) + " | all |\n" + "|---" * (len(lengths) + 2) + "|")

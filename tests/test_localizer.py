@@ -253,3 +253,21 @@ def test_an_odometry_spike_is_never_reported_as_tracking(persist):
     else:
         bad = [e.status for e, p in zip(est[k0:], seq.poses[k0:]) if np.linalg.norm(e.pose[:2] - p[:2]) >= 1.0]
         assert "tracking" not in bad
+
+
+def test_frame_consistency_at_the_monitor_min_consistency_boundary():
+    """A frame is judged by the share of its wall hits the reported alignment explains:
+    at or above localizer.monitor_min_consistency it may stay `tracking`, below it is `lost`."""
+    scene = build_scene("apartment", seed=2)
+    frames = list(simulate(scene, SimSettings(), seed=2, n_frames=30))
+    loc, est = _run(scene, frames)
+    assert est[-1].status == "tracking"
+    cfg = loc.settings.localizer
+    points = loc.bev.last_wall_hits
+    share = loc._explained(est[-1].alignment, points[:: max(1, len(points) // cfg.monitor_max_points)])
+    assert 0.0 < share <= 1.0
+    for threshold, consistent in ((share, True), (np.nextafter(share, 2.0), False)):
+        loc.settings = loc.settings.model_copy(update={"localizer": cfg.model_copy(update={"monitor_min_consistency": threshold})})
+        assert loc._frame_consistent(est[-1].alignment) is consistent
+        status, confidence = loc.tracker.assess_frame(est[-1].alignment, loc.bev.plane_pose(frames[-1])[:2], consistent)
+        assert (status, confidence > 0) == (("tracking", True) if consistent else ("lost", False))

@@ -13,6 +13,7 @@ import pytest
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
 from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.frames import LaserFrame
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.tools.cli import main as cli_main
 from laser_helpers import laser_run, write_carmen
@@ -105,11 +106,74 @@ INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" /
 def test_real_building_benchmark_ci_subset(monkeypatch):
     """One held-out Intel window through benchmarks/eval_real.py, online and reference
     (the full table: python benchmarks/eval_real.py)."""
-    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
-    eval_real = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, spec.name, eval_real)  # its dataclasses resolve their annotations through it
-    spec.loader.exec_module(eval_real)
+    eval_real = _eval_real()
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
     assert row["success"] and row["ref_success"], row
     assert row["first_pose_frame"] == Settings().localizer.every_k_frames - 1  # a pose from round 1
     assert "### laser" in eval_real.table([row], [20], True)
+
+
+def _eval_real():
+    import sys
+
+    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("eval_real", module)  # its dataclass looks its module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_eval_real_status_table_counts_tracking_frames_off_by_1m_or_more():
+    eval_real = _eval_real()
+    rows = [{"frame_status": ["initializing", "tracking", "tracking", "tracking", "lost"],
+             "frame_errors": [None, 0.2, 0.999, 1.0, 3.0]}]
+    table = eval_real.status_table(rows)
+    assert "| tracking | 3 | 66.7% | 33.3% | 1 |" in table  # 1.0 m exactly counts as off
+    assert "| initializing | 1 | 0.0% | 100.0% | 1 |" in table  # no pose: off
+    assert "| ambiguous | 0 | - | - | 0 |" in table
+    rows[0]["frame_confidence"] = [None, 0.95, 0.5, 0.2, 0.0]
+    confidence = eval_real.confidence_table(rows)
+    assert "| > 0.5 | 1 | 100.0% |" in confidence and "| > 0.9 | 1 | 100.0% |" in confidence
+
+
+def test_eval_real_conditions_change_only_what_they_name():
+    from zfloc_stream.frames import FLOOR, WALL, CameraFrame
+
+    eval_real = _eval_real()
+    assert eval_real.drift_overrides(1.0) == []
+    assert "datasets.odometry.noise=0.06" in eval_real.drift_overrides(3.0)[0]
+    assert eval_real.camera_settings(eval_real.Conditions(drift=3.0)).odom_yaw_noise_deg == pytest.approx(0.9)
+    labels = np.full((6, 8), WALL, dtype=np.uint8)
+    labels[4:] = FLOOR  # border between rows 3 and 4
+    band = eval_real._border_band(labels)
+    assert band[2:6].all() and not band[:2].any()
+    depth = np.full((6, 8), 4.0, dtype=np.float32)
+    frame = CameraFrame(depth, labels, np.array([[4.0, 0, 4], [0, 4.0, 3], [0, 0, 1]]), np.eye(4), 0.0)
+    scaled = eval_real.monocular_frames([frame], eval_real.Conditions(depth_scale_error=0.1), 0, "intel", 0)[0]
+    factor = scaled.depth[0, 0] / 4.0
+    assert 0.9 <= factor <= 1.1 and factor != 1.0 and np.allclose(scaled.depth, 4.0 * factor)
+    assert (scaled.labels == labels).all()
+    flipped = eval_real.monocular_frames([frame], eval_real.Conditions(label_noise=1.0), 0, "intel", 0)[0]
+    assert (flipped.labels[2:4] == FLOOR).all() and (flipped.labels[4:6] == WALL).all() and (flipped.labels[:2] == WALL).all()
+    assert (flipped.depth == depth).all()
+
+
+def test_eval_real_whole_walk_metrics_and_splicing():
+    eval_real = _eval_real()
+    assert eval_real.kidnap_order(9, False) == [(0, 9)]
+    assert eval_real.kidnap_order(9, True) == [(0, 3), (6, 9), (3, 6)]
+    statuses = ["initializing", "tracking", "tracking", "lost", "lost", "tracking", "tracking"]
+    errors = np.array([np.inf, 0.1, 0.2, 5.0, 5.0, 3.0, 0.1])
+    m = eval_real.walk_metrics(statuses, errors, cuts=[3])
+    assert m["first_fix"] == 1 and m["within_1m"] == pytest.approx(3 / 6)
+    assert (m["off_runs"], m["longest_off"], m["recovery"]) == (1, 3, [3])
+    assert eval_real.walk_metrics(["lost"] * 3, errors[:3], [])["first_fix"] is None
+
+    def scan(x):
+        T = np.eye(4)
+        T[0, 3] = x
+        return LaserFrame(np.ones(4), 0.0, 0.5, 0.1, 10.0, T, 0.0)
+
+    frames, cuts = eval_real.spliced([[scan(0.0), scan(1.0)], [scan(50.0), scan(52.0)]])
+    assert cuts == [2]
+    assert [f.T_odom_sensor[0, 3] for f in frames] == [0.0, 1.0, 1.0, 3.0]  # no motion across the cut

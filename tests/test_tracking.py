@@ -483,3 +483,13 @@ def test_a_mode_starts_tracking_only_when_no_rival_is_near_the_top_of_the_round(
     if tracked:  # once tracked, a rival near the top is the collapse rule's business
         tracker.update([seen(TRUE, rng, 5, 0.8), seen(FAR, rng, 5, 0.79)], sensor_at(5), frame=25)
         assert not tracker.singled_out(tracker.best) and tracker.status == "tracking"
+
+
+def test_confidence_above_dominance_weight_only_on_tracking_frames():
+    rng = make_rng(10, "frame")
+    tracker = HypothesisTracker(TrackingSettings(confirm_rounds=1))
+    tracker.update([seen(TRUE, rng, 0, 0.8)], sensor_at(0), frame=0)
+    assert tracker.status == "tracking" and tracker.best.weight == pytest.approx(1.0)
+    assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("tracking", pytest.approx(1.0))
+    tracker._status = "ambiguous"  # the same mode, not vouched for by the status
+    assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", 0.5)

@@ -371,7 +371,7 @@ class Localizer:
         if len(points) < cfg.monitor_min_points:
             return None
         points = points[:: max(1, len(points) // cfg.monitor_max_points)]
-        return self._explained(alignment, points) >= cfg.monitor_min_consistency
+        return bool(self._explained(alignment, points) >= cfg.monitor_min_consistency)
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""

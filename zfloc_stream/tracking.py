@@ -415,8 +415,9 @@ class HypothesisTracker:
         spike or jump lands here), or the pose jumped (pose_jumped).
 
         confidence in [0, 1], for a caller to threshold: the reported mode's share of the
-        bank's weight, scaled by how far it is confirmed (hits / confirm_rounds, at most
-        1), and 0 on a frame whose evidence contradicts it. nan before any mode.
+        bank's weight, scaled by how far it is confirmed (hits / rounds_to_track, at most
+        1), at most dominance_weight unless the frame is `tracking`, and 0 on a frame whose
+        evidence contradicts it. nan before any mode.
         """
         best = self.best
         previous, self._last_reported = self._last_reported, alignment
@@ -424,8 +425,11 @@ class HypothesisTracker:
             return self._status, float("nan")
         contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
         status: Status = "lost" if contradicted and self._status == "tracking" else self._status
-        confirmation = min(1.0, best.hits / self.settings.confirm_rounds)
-        return status, 0.0 if contradicted else float(best.weight * confirmation)
+        confirmation = min(1.0, best.hits / self.rounds_to_track())
+        confidence = 0.0 if contradicted else float(best.weight * confirmation)
+        # never more than the status vouches for: above dominance_weight only while tracking
+        # (belgioioso camera session: a mode 16 m off, not singled out, carried 0.96 of the weight)
+        return status, confidence if status == "tracking" else min(confidence, self.settings.dominance_weight)
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:
         return next((m for m in self.modes if m.id == mode_id), None)
