@@ -320,8 +320,8 @@ class FloorplanMatches:
         near, kept = _nearest_neighbours(self.lines, neighbours, fp_cfg.max_triplets)
         if kept is not None:
             warnings.warn(f"floorplan {getattr(floorplan, 'name', '')!r}: its {len(self.lines)} lines have more line triplets than "
-                          f"floorplan.max_triplets ({fp_cfg.max_triplets:,}), a cluttered map: each line's triplets use its {kept} "
-                          "nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
+                          f"floorplan.max_triplets ({fp_cfg.max_triplets:,}; a cluttered map, or a dense plan): each line's triplets "
+                          f"use its {kept} nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
         tri = _ordered_triplets(near)
         if len(tri):
             a = alpha[tri]
