@@ -605,6 +605,8 @@ def main(argv=None) -> int:
     args.set = list(args.set) + drift_overrides(conditions.drift)
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
+    if args.plan_style and (args.reference_cache or args.drift_free or args.no_laser and not args.camera):
+        parser.error("--plan-style runs its own references (no --reference-cache, --drift-free) on laser and/or --camera windows")
     logs = [s for s in args.logs.split(",") if s]
     missing_logs = [log for log in logs if not (DATA / f"{log}-corrected.log.gz").exists()]
     if missing_logs:

@@ -54,13 +54,13 @@ def stage_row(floorplan, localizer, frames, settings) -> dict:
     est = settings.estimator
     truth = true_alignment(localizer.plane_poses, [f.ground_truth for f in frames])
     field = floorplan_scorer(floorplan, est.scoring).face_field
-    refined = alignment_of(refine_batch(field, obs.wall_points, model_rows([truth]), est.refine, "fixed", kernels=est.kernels)[0])
+    refined = alignment_of(refine_batch(field, obs.wall_points, model_rows([truth]), est.refine, "fixed")[0])
     centre = obs.wall_points.mean(axis=0)
     if np.linalg.norm(refined.apply(centre) - truth.apply(centre)) < 0.5:
         truth = refined
     best = result.best if result is not None else None
     models = [truth] + ([best.alignment] if best is not None else [])
-    s = score_hypotheses(floorplan, obs, model_rows(models), est.scoring, kernels=est.kernels)
+    s = score_hypotheses(floorplan, obs, model_rows(models), est.scoring)
     near = [k for k, h in enumerate(result.hypotheses if result else [])
             if np.linalg.norm(h.alignment.apply(centre) - truth.apply(centre)) < 1.0]
     row = {"truth_C": float(s.total[0]), "truth_Cc": float(s.consistency[0]), "truth_Cv": float(s.violation[0]),

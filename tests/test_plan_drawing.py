@@ -13,14 +13,15 @@ RES = 0.05
 
 
 def cluttered_rooms() -> tuple[Floorplan, np.ndarray]:
-    """Two 6 x 4 m rooms (walls 2 cells thick) with a 1 m door between them, plus 40 specks
+    """Two 6 x 4 m rooms (walls 2 cells thick) with a 1 m door between them, plus specks
     of clutter (furniture legs, people); returns the map and the clutter centres."""
     occ = np.zeros((100, 160), dtype=bool)
     occ[10:12, 10:150] = occ[88:90, 10:150] = True  # y = 0.5 and 4.4 m
     occ[10:90, 10:12] = occ[10:90, 148:150] = True
     occ[10:40, 79:81] = occ[60:90, 79:81] = True  # the dividing wall, door from y = 2.0 to 3.0 m
-    rng = make_rng(0, "clutter")
-    specks = np.column_stack([rng.integers(20, 80, 40), rng.integers(20, 140, 40)])
+    rng = make_rng(0, "clutter")  # isolated specks, about 1 m apart, jittered
+    rows, cols = np.meshgrid(np.arange(22, 80, 20), np.arange(22, 140, 20), indexing="ij")
+    specks = np.column_stack([rows.ravel(), cols.ravel()]) + rng.integers(-4, 5, (rows.size, 2))
     specks = specks[np.abs(specks[:, 1] - 80) > 8]
     for r, c in specks:
         occ[r : r + 3, c : c + 3] = True

@@ -48,17 +48,21 @@ def draw_plan(floorplan: Floorplan, min_length: float = 0.5, min_blob: float = 0
     """(N, 2, 2) wall segments in metres fitted to the floorplan's wall cells.
 
     min_length: shortest wall drawn (m); min_blob: blobs whose bounding box is smaller
-    than this (m) are clutter; max_gap: wall pixels this far apart (m) along a segment are
+    than this (m), pixels up to max_gap apart joined, are clutter; max_gap: wall pixels this far apart (m) along a segment are
     one wall, larger openings (doors) stay open; merge_offset: parallel pieces this close
     (m) are one wall (a thick wall's several Hough lines); votes: the Hough accumulator
     threshold as a length (m) of wall pixels on the line; min_support: the share of a
     segment's length that must run on wall pixels (the Hough transform also joins
     scattered clutter into lines)."""
     res = floorplan.resolution
-    labels, span = blob_spans(floorplan.occupied)
-    keep = span >= min_blob / res
+    # clutter: blobs smaller than min_blob once pixels up to max_gap apart are joined (a wall
+    # seen from afar is a dotted line of single cells; a chair leg or a person is a speck)
+    reach = max(int(round(max_gap / res / 2)), 1)
+    joined = ndimage.binary_dilation(floorplan.occupied, structure=np.ones((2 * reach + 1,) * 2, dtype=bool))
+    labels, span = blob_spans(joined)
+    keep = span - 2 * reach >= min_blob / res
     keep[0] = False
-    walls = keep[labels]  # clutter (small blobs) removed
+    walls = floorplan.occupied & keep[labels]
     if not walls.any():
         return np.zeros((0, 2, 2))
     found = cv2.HoughLinesP(walls.astype(np.uint8) * 255, 1, np.pi / 360, max(int(round(votes / res)), 2),

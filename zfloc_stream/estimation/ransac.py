@@ -283,8 +283,8 @@ class FloorplanMatches:
         near, kept = _nearest_neighbours(self.lines, neighbours, fp_cfg.max_triplets)
         if kept is not None:
             warnings.warn(f"floorplan {getattr(floorplan, 'name', '')!r}: its {len(self.lines)} lines have more line triplets than "
-                          f"floorplan.max_triplets ({fp_cfg.max_triplets:,}), a cluttered map: each line's triplets use its {kept} "
-                          "nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
+                          f"floorplan.max_triplets ({fp_cfg.max_triplets:,}; a cluttered map, or a dense plan): each line's triplets "
+                          f"use its {kept} nearest neighbours only (raise floorplan.max_triplets to keep all)", stacklevel=3)
         tri = admissible_triplets(near, alpha, par, self.lines.lengths)[0]
         self.triplets = _AngleTable(tri, (alpha[tri[:, 1:]] - alpha[tri[:, :1]]) if len(tri) else np.zeros((0, 2)), tol)
         # the triplets' first two lines, for the two-line solve at a fixed scale
