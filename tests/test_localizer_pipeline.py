@@ -93,7 +93,7 @@ def test_inline_ignores_join_delay(laser):
 
 def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkeypatch):
     floorplan, frames = laser
-    settings = _settings("localizer.pipeline=pipelined")
+    settings = _settings("localizer.pipeline=pipelined", "localizer.join_delay=5")
 
     def refuse(*args, **kwargs):
         raise InputError("estimator refused this BEV")
@@ -118,7 +118,7 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
 
 def test_close_stops_the_worker_and_drops_rounds_no_frame_reached(laser):
     floorplan, frames = laser
-    loc = Localizer(floorplan, _settings("localizer.pipeline=pipelined"))
+    loc = Localizer(floorplan, _settings("localizer.pipeline=pipelined", "localizer.join_delay=5"))
     for f in frames[:7]:  # round started at frame 4 would land at frame 9
         loc.push(f)
     pool = loc._pool
@@ -173,7 +173,8 @@ def test_online_gives_the_first_fix_inline_then_joins_later(laser):
     assert [_bits(e) for e in online[: first + 1]] == [_bits(e) for e in inline[: first + 1]]
     later = [i for i in range(first + 1, len(frames)) if (i + 1) % k == 0]
     assert later and all("round_start" in online[i].timings for i in later)
-    assert all("round_wait" in online[i + k].timings for i in later if i + k < len(frames))
+    delay = _settings().localizer.round_delay
+    assert all("round_wait" in online[i + delay].timings for i in later if i + delay < len(frames))
     assert all(e.pose is not None for e in online[first:])
 
 

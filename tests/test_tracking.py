@@ -474,7 +474,8 @@ def test_a_mode_starts_tracking_only_when_no_rival_is_near_the_top_of_the_round(
     """A rival scoring just within confirm_score_gap of the leader (near the top too)
     keeps it from starting to track; just outside, it does not."""
     rng = make_rng(9, "singled")
-    tracker = HypothesisTracker(TrackingSettings())
+    # the dominance rule held loose (0.5) so that only the singled-out rule decides here
+    tracker = HypothesisTracker(TrackingSettings(dominance_weight=0.5))
     gap = tracker.settings.confirm_score_gap
     statuses = run_rounds(tracker, 0, 5, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.8 - gap - offset)])
     assert tracker.dominates(tracker.best) and not tracker.has_close_rival(tracker.best)
@@ -492,4 +493,5 @@ def test_confidence_above_dominance_weight_only_on_tracking_frames():
     assert tracker.status == "tracking" and tracker.best.weight == pytest.approx(1.0)
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("tracking", pytest.approx(1.0))
     tracker._status = "ambiguous"  # the same mode, not vouched for by the status
-    assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", 0.5)
+    cap = tracker.settings.dominance_weight
+    assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", cap)

@@ -417,7 +417,11 @@ class TrackingSettings(Section):
     confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within confirm_score_gap) before it can be tracked
     confirm_score_gap: float = Field(0.1, ge=0, le=10)  # "near the top": a fresh score within this of the round's best
     ambiguity_ratio: float = Field(0.5, gt=0, le=1)  # a second confirmed mode with weight >= this * best: ambiguous
-    dominance_weight: float = Field(0.5, ge=0, lt=1)  # tracking needs the best mode's share of the weight above this (0.5: more than all rivals together)
+    # tracking needs the best mode's share of the tracker's weight above this: 0.9 = its rivals
+    # together hold under a tenth of it. At 0.5 (more than all rivals together) 2.9% of the
+    # real laser windows' tracking frames were 1 m+ off (16 of 200 windows, rivals holding
+    # 30-47%); at 0.9 0.4%, camera 0.2%, the same poses (docs/status.md).
+    dominance_weight: float = Field(0.9, ge=0, lt=1)
     lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
     lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
@@ -462,7 +466,12 @@ class LocalizerSettings(Section):
     # there if the worker is late), so push costs about one fusion. delayed: computed inline
     # but applied join_delay frames later: bit for bit what pipelined gives, without a worker.
     pipeline: Literal["online", "inline", "pipelined", "delayed"] = "online"
-    join_delay: int = Field(0, ge=0, le=10_000)  # frames from a round's start to its result (pipelined / delayed); 0 = every_k_frames
+    # frames from a round's start to its result (online / pipelined / delayed); 0 = every_k_frames.
+    # 1: a round started at frame i is applied at frame i + 1, so a push blocks only when a
+    # round takes longer than one frame interval (~50-90 ms against 100 ms at 10 Hz). With
+    # every_k_frames (5) a correction landed 5 frames late and cost real-building and scene
+    # windows at #20 / #35 / #100 (docs/kernels.md); at 1 no length is below inline.
+    join_delay: int = Field(1, ge=0, le=10_000)
     worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
 
     _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
