@@ -54,25 +54,29 @@ def _erase_walls_near(floorplan: Floorplan, points: np.ndarray, radius: float) -
 
 
 def test_a_track_through_an_unmapped_part_for_ten_frames_is_not_lost():
+    """The plan lacks what 12 frames see: the track carries on through them (poses within
+    1 m, the same mode tracked again afterwards); frames whose own hits the plan cannot
+    explain are not vouched for as `tracking` (issue 26), but the track is not dropped."""
     scene, seq = laser_run("office", 45, seed=1)
     unmapped = slice(25, 37)  # 12 frames whose surroundings the plan lacks
     plan = _erase_walls_near(scene.floorplan, seq.poses[unmapped, :2], radius=2.5)
     settings = load_settings(base_overrides=FIXED)
-    localizer = Localizer(plan, settings)
-    statuses, explained = [], []
-    for k, frame in enumerate(seq.frames):
-        est = localizer.push(frame)
-        statuses.append(est.status)
-        hits = localizer.bev.last_wall_hits
-        explained.append(np.mean(plan.distance(seq.alignments[k].apply(hits)) < 0.3))
-        if k >= unmapped.start:
-            assert est.pose is not None
-    assert statuses[unmapped.start - 1] == "tracking", statuses
+    statuses, explained, errors = [], [], []
+    with Localizer(plan, settings) as localizer:
+        for k, frame in enumerate(seq.frames):
+            est = localizer.push(frame)
+            statuses.append(est.status)
+            hits = localizer.bev.last_wall_hits
+            explained.append(np.mean(plan.distance(seq.alignments[k].apply(hits)) < 0.3))
+            if k >= unmapped.start - 5:
+                assert est.pose is not None
+                errors.append(np.linalg.norm(est.pose[:2] - seq.poses[k][:2]))
+    assert "tracking" in statuses[: unmapped.start - 5], statuses
     # the plan really misses what those scans see (the true alignment explains little)
     assert sum(e < 0.5 for e in explained[unmapped]) >= 10, np.round(explained, 2)
-    assert "lost" not in statuses[unmapped.start :], statuses
-    final_error = np.linalg.norm(est.pose[:2] - seq.poses[-1][:2])
-    assert final_error < 1.0
+    assert max(errors) < 1.0, np.round(errors, 2)  # the track went on through the gap
+    assert "tracking" in statuses[unmapped], statuses  # and was not dropped in it
+    assert statuses[-1] in ("tracking", "ambiguous"), statuses
 
 
 def test_correlative_seeds_find_a_rigid_alignment_and_the_reference_refines_it():
