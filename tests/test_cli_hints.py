@@ -180,12 +180,10 @@ def test_truncated_session_hint_names_an_option_run_has(made, tmp_path, capsys):
     cut.write_bytes(data[: len(data) * 2 // 3])
     rc, _, err = call(capsys, cli.main, "run", "--input", cut, "--out", tmp_path / "a", "--no-progress")
     line = one_line_error(rc, err)
-    if "--salvage" in line and "--salvage" not in known_options("run"):
-        pytest.skip("run --salvage arrives with issue 29 (the hint is right once it lands)")
+    assert "--salvage" in line, line
     assert_options_exist(line, "run")
-    if "--salvage" in line:
-        rc, out, err = call(capsys, cli.main, "run", "--input", cut, "--salvage", "--out", tmp_path / "b", "--no-progress")
-        assert rc == 0, err
+    rc, out, err = call(capsys, cli.main, "run", "--input", cut, "--salvage", "--out", tmp_path / "b", "--no-progress")
+    assert rc == 0, err
 
 
 def test_export_of_inputs_only_says_to_run_first_and_that_works(made, tmp_path, capsys):
