@@ -170,6 +170,7 @@ class Localizer:
         self.last_result = None  # LocalizationResult of the latest round, for logging
         self.last_observation = None  # BevObservation of the latest round, for overlays
         self._inconsistent_frames = 0  # consecutive frames the tracked alignment does not explain
+        self._consistency_memo = None  # (alignment, wall hits, explained share) of the last _frame_consistent
         self._force_global = False  # the monitor asks the next round for a full global search
         self._force_seq = 0  # how many times it asked (a request made after a round started outlives it)
         self._pending: deque[_Pending] = deque()  # rounds started, not yet applied, oldest first
@@ -370,8 +371,13 @@ class Localizer:
         points = self.bev.last_wall_hits
         if len(points) < cfg.monitor_min_points:
             return None
-        points = points[:: max(1, len(points) // cfg.monitor_max_points)]
-        return bool(self._explained(alignment, points) >= cfg.monitor_min_consistency)
+        cached = self._consistency_memo
+        if cached is not None and cached[0] is alignment and cached[1] is points:
+            share = cached[2]  # the monitor and the estimate ask about the same frame and alignment
+        else:
+            share = self._explained(alignment, points[:: max(1, len(points) // cfg.monitor_max_points)])
+            self._consistency_memo = (alignment, points, share)
+        return bool(share >= cfg.monitor_min_consistency)
 
     def _monitor(self) -> None:
         """Watch each fused frame against the tracked alignment (see LocalizerSettings)."""

@@ -245,6 +245,17 @@ def _solve_3l_one(i0, i1, i2, j0, j1, j2, bnx, bny, bd, fnx, fny, fd, table, cos
 
 
 @njit
+def _append_model(out, src, kept, sample, tx, ty, theta, s):
+    """Writes one surviving model (and the sample it came from) at row kept; the next row."""
+    out[kept, 0] = tx
+    out[kept, 1] = ty
+    out[kept, 2] = theta
+    out[kept, 3] = s
+    src[kept] = sample
+    return kept + 1
+
+
+@njit
 def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table, sin_table, n_bev, limits):
     """Models (tx, ty, theta, s) with theta NOT yet wrapped, and the index of the sample
     each came from, in sample order. Buffers are sized for every sample surviving and
@@ -257,12 +268,7 @@ def _solve(bnx, bny, bd, fnx, fny, fd, b0, b1, b2, f0, f1, f2, table, cos_table,
         ok, tx, ty, theta, s = _solve_3l_one(b0[i], b1[i], b2[i], f0[i], f1[i], f2[i], bnx, bny, bd, fnx, fny, fd,
                                              table, cos_table, sin_table, n_bev, limits)
         if ok:
-            out[kept, 0] = tx
-            out[kept, 1] = ty
-            out[kept, 2] = theta
-            out[kept, 3] = s
-            src[kept] = i
-            kept += 1
+            kept = _append_model(out, src, kept, i, tx, ty, theta, s)
     return out[:kept].copy(), src[:kept].copy()
 
 
@@ -326,12 +332,7 @@ def _drawn_3l(starts, sizes, counts, uniform, j_start, j_end, b_start, left_star
             ok, tx, ty, theta, s = _solve_3l_one(p0[q], p1[q], p2[q], lines[k, 0], lines[k, 1], lines[k, 2], bnx, bny, bd, fnx, fny,
                                                  fd, table, cos_table, sin_table, n_bev, limits)
             if ok:
-                out[kept, 0] = tx
-                out[kept, 1] = ty
-                out[kept, 2] = theta
-                out[kept, 3] = s
-                src[kept] = j + k
-                kept += 1
+                kept = _append_model(out, src, kept, j + k, tx, ty, theta, s)
         j += m
     return out[:kept].copy(), src[:kept].copy()
 
@@ -464,19 +465,9 @@ def _write_2l(out, src, kept, i, s, res):
     """Appends sample i's surviving candidates, a before b (ordered by sample)."""
     theta_a, ok_a, tx_a, ty_a, theta_b, ok_b, tx_b, ty_b = res
     if ok_a:
-        out[kept, 0] = tx_a
-        out[kept, 1] = ty_a
-        out[kept, 2] = theta_a
-        out[kept, 3] = s
-        src[kept] = i
-        kept += 1
+        kept = _append_model(out, src, kept, i, tx_a, ty_a, theta_a, s)
     if ok_b:
-        out[kept, 0] = tx_b
-        out[kept, 1] = ty_b
-        out[kept, 2] = theta_b
-        out[kept, 3] = s
-        src[kept] = i
-        kept += 1
+        kept = _append_model(out, src, kept, i, tx_b, ty_b, theta_b, s)
     return kept
 
 
