@@ -9,8 +9,10 @@ changing. Growth runs inside a local window first (most seeds end there: short f
 noise); only a line that reaches the window's rim regrows over all free points.
 
 Neighbourhoods: the points are sorted once into grid cells (row-major, cell side
-neighbourhood_radius) and scanned in blocks of _BLOCK consecutive points, a block skipped
-when its bounding box is out of reach; each point is tested as dx*dx + dy*dy <= r*r.
+neighbourhood_radius); a ball query visits only the grid rows and columns it can reach
+(found by binary search, so its cost does not grow with the cloud) and tests each point
+there as dx*dx + dy*dy <= r*r, so it returns the same points in the same order as a scan
+of the whole cloud in grid order would.
 
 Determinism: every sum runs in a fixed order (plain IEEE operations, no fastmath), so a
 machine gives the same lines bit for bit run after run. Another machine (another libm
@@ -26,9 +28,6 @@ import numpy as np
 
 from .geometry import LineSet
 from .numba_support import njit
-
-_BLOCK = 16  # points per bounding box of the neighbourhood scan
-
 
 @njit
 def _dot(x0, x1, y0, y1):
@@ -62,38 +61,37 @@ def _pca_line(xy, idx, m):
 
 
 @njit
-def _blocks(pos_xy):
-    """Bounding box (lo, hi) of each run of _BLOCK consecutive rows."""
-    n = pos_xy.shape[0]
-    nb = (n + _BLOCK - 1) // _BLOCK
-    lo = np.empty((nb, 2))
-    hi = np.empty((nb, 2))
-    for b in range(nb):
-        start = b * _BLOCK
-        for j in range(2):
-            lo[b, j] = pos_xy[start, j]
-            hi[b, j] = pos_xy[start, j]
-        for k in range(start + 1, min(start + _BLOCK, n)):
-            for j in range(2):
-                lo[b, j] = min(lo[b, j], pos_xy[k, j])
-                hi[b, j] = max(hi[b, j], pos_xy[k, j])
-    return lo, hi
+def _first_at_or_after(cell_y, cell_x, cy, cx):
+    """First position in grid order whose cell (cell_y, cell_x) is not before (cy, cx)
+    (row-major): a binary search over the sorted cells."""
+    lo = 0
+    hi = cell_y.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cell_y[mid] < cy or (cell_y[mid] == cy and cell_x[mid] < cx):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @njit
-def _free_ball(pos_xy, tree_index, lo, hi, qx, qy, r2, taken, out):
+def _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, qx, qy, r2, taken, out):
     """Points within sqrt(r2) of (qx, qy) that are not taken, in the grid order (see the
-    module docstring), written to out; returns their count. A block is skipped only when
-    its box's squared distance exceeds r2, which (rounding being monotone) no point inside
-    it can undercut."""
-    n = pos_xy.shape[0]
+    module docstring), written to out; returns their count. Only the grid rows and columns
+    the ball can reach are visited (one cell of margin on each side absorbs the rounding of
+    the cell arithmetic; every point is then tested exactly), each row's cells being one
+    consecutive run of the grid order."""
+    r = math.sqrt(r2)
+    x0 = math.floor((qx - r - grid_origin[0]) / cell) - 1
+    x1 = math.floor((qx + r - grid_origin[0]) / cell) + 1
+    y0 = max(math.floor((qy - r - grid_origin[1]) / cell) - 1, cell_y[0])
+    y1 = min(math.floor((qy + r - grid_origin[1]) / cell) + 1, cell_y[cell_y.shape[0] - 1])
     count = 0
-    for b in range(lo.shape[0]):
-        ex = lo[b, 0] - qx if qx < lo[b, 0] else (qx - hi[b, 0] if qx > hi[b, 0] else 0.0)
-        ey = lo[b, 1] - qy if qy < lo[b, 1] else (qy - hi[b, 1] if qy > hi[b, 1] else 0.0)
-        if ex * ex + ey * ey > r2:
-            continue
-        for k in range(b * _BLOCK, min((b + 1) * _BLOCK, n)):
+    for cy in range(y0, y1 + 1):
+        start = _first_at_or_after(cell_y, cell_x, cy, x0)
+        stop = _first_at_or_after(cell_y, cell_x, cy, x1 + 1)
+        for k in range(start, stop):
             i = tree_index[k]
             if taken[i]:
                 continue
@@ -173,15 +171,16 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
 
 
 @njit
-def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, gap, max_iter, tol, min_points, min_length):
+def _extract(pts, perm, tree_index, cell_y, cell_x, grid_origin, cell, r_neigh2, r_local2, min_seed, rim, inlier, gap,
+             max_iter, tol, min_points, min_length):
     """The seed loop: (normals, offsets, endpoints, support) of the accepted lines in the
-    order found (unsorted). tree_index: the points in grid order (_grid_order)."""
+    order found (unsorted). tree_index: the points in grid order, cell_y / cell_x their
+    cells (_grid_order)."""
     n = pts.shape[0]
     pos_xy = np.empty((n, 2))
     for k in range(n):
         pos_xy[k, 0] = pts[tree_index[k], 0]
         pos_xy[k, 1] = pts[tree_index[k], 1]
-    lo, hi = _blocks(pos_xy)
     taken = np.zeros(n, np.bool_)
     tried = np.zeros(n, np.bool_)
     pool = np.arange(n)  # indices of the free points, compacted after each accepted line
@@ -201,10 +200,10 @@ def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, g
         tried[seed] = True
         sx = pts[seed, 0]
         sy = pts[seed, 1]
-        nn = _free_ball(pos_xy, tree_index, lo, hi, sx, sy, r_neigh2, taken, neigh)
+        nn = _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, sx, sy, r_neigh2, taken, neigh)
         if nn < min_seed:
             continue  # isolated point: noise
-        nw = _free_ball(pos_xy, tree_index, lo, hi, sx, sy, r_local2, taken, window)
+        nw = _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, sx, sy, r_local2, taken, window)
         for k in range(nw):
             window_xy[k, 0] = pts[window[k], 0]
             window_xy[k, 1] = pts[window[k], 1]
@@ -259,11 +258,15 @@ def _extract(pts, perm, tree_index, r_neigh2, r_local2, min_seed, rim, inlier, g
     return normals[:found].copy(), offsets[:found].copy(), ends[:found].copy(), counts[:found].copy()
 
 
-def _grid_order(pts: np.ndarray, cell: float) -> np.ndarray:
-    """The points' indices sorted by grid cell (row-major, side `cell`), then by index: runs
-    of consecutive points are spatially compact, so the blocks' boxes prune well."""
-    cells = np.floor((pts - pts.min(axis=0)) / max(cell, 1e-9)).astype(np.int64)
-    return np.lexsort((np.arange(len(pts)), cells[:, 0], cells[:, 1]))
+def _grid_order(pts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(order, cell_y, cell_x, origin): the points' indices sorted by grid cell (row-major,
+    side `cell`, from origin = the points' minimum), then by index, and each sorted point's
+    cell. Cells are int64 of the extent over the side: no dense grid, so a sparse cloud
+    over a large area costs nothing extra."""
+    origin = pts.min(axis=0)
+    cells = np.floor((pts - origin) / cell).astype(np.int64)
+    order = np.lexsort((np.arange(len(pts)), cells[:, 0], cells[:, 1]))
+    return order, np.ascontiguousarray(cells[order, 1]), np.ascontiguousarray(cells[order, 0]), origin
 
 
 def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSet:
@@ -275,8 +278,10 @@ def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSe
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     perm = rng.permutation(n)
     s = settings
+    cell = s.neighbourhood_radius
+    order, cell_y, cell_x, origin = _grid_order(pts, cell)
     normals, offsets, ends, support = _extract(
-        pts, perm.astype(np.int64), _grid_order(pts, s.neighbourhood_radius),
+        pts, perm.astype(np.int64), order, cell_y, cell_x, origin, cell,
         s.neighbourhood_radius * s.neighbourhood_radius, s.local_radius * s.local_radius, s.min_seed_neighbours,
         s.local_radius - s.gap, s.inlier_distance, s.gap, s.max_grow_iterations, s.converge_tolerance,
         s.min_points, s.min_length)
