@@ -288,3 +288,34 @@ def test_no_circle_in_degenerate_or_too_wide_input():
     assert len(extract_circles(long_wall, CIRCLES, np.random.default_rng(1))) == 0
     collinear = np.stack([np.arange(20) * 0.05, np.zeros(20)], axis=1)  # every triplet degenerate
     assert len(extract_circles(collinear, CIRCLES, np.random.default_rng(2))) == 0
+
+
+def test_grid_queries_return_what_a_scan_of_every_free_point_returns():
+    """The ball and band queries of line growing read only the grid cells they can reach;
+    they must return exactly the free points a scan of the whole cloud finds (the ball's in
+    grid order, the band's sorted by index), on clouds sparse over a large area, dense,
+    and with bands parallel, nearly parallel and oblique to the grid axes."""
+    from zfloc_stream.line_growing import free_points_in_ball, free_points_in_band, point_grid
+
+    rng = make_rng(3, "grid-queries")
+    for n, extent, cell in [(40, 300.0, 0.25), (3000, 12.0, 0.25), (2000, 5.0, 0.05), (500, 50.0, 1.5)]:
+        pts = rng.uniform(-extent / 2, extent / 2, (n, 2)) + rng.uniform(-1e3, 1e3, 2)
+        grid = point_grid(pts, cell)
+        xy, index = grid[0], grid[1]
+        taken = rng.uniform(size=n) < 0.3
+        out = np.empty(n, np.int64)
+        for _ in range(30):
+            q = pts[rng.integers(n)] + rng.normal(0, cell, 2)
+            r = float(rng.uniform(0.1, 3.0)) * cell * 4
+            d2 = (xy[:, 0] - q[0]) ** 2 + (xy[:, 1] - q[1]) ** 2
+            want = index[(d2 <= r * r) & ~taken[index]]
+            got = out[: free_points_in_ball(grid, q[0], q[1], r * r, taken, out)]
+            assert np.array_equal(got, want)
+        for angle in [0.0, np.pi / 2, 1e-9, np.pi / 2 + 1e-9, 1e-5, 0.3, 2.0, np.pi]:
+            normal = np.array([-np.sin(angle), np.cos(angle)])
+            through = pts[rng.integers(n)]
+            cn, inlier = float(normal @ through), float(rng.uniform(0.02, 0.5))
+            dist = np.abs(pts[:, 0] * normal[0] + pts[:, 1] * normal[1] - cn)
+            want = np.flatnonzero((dist <= inlier) & ~taken)
+            got = out[: free_points_in_band(grid, taken, normal[0], normal[1], cn, inlier, out)]
+            assert np.array_equal(got, want)

@@ -12,7 +12,10 @@ Neighbourhoods: the points are sorted once into grid cells (row-major, cell side
 neighbourhood_radius); a ball query visits only the grid rows and columns it can reach
 (found by binary search, so its cost does not grow with the cloud) and tests each point
 there as dx*dx + dy*dy <= r*r, so it returns the same points in the same order as a scan
-of the whole cloud in grid order would.
+of the whole cloud in grid order would. A line regrown over all free points reads only
+the cells its band crosses (free_points_in_band), not the whole cloud, and taken points
+are skipped by a flag instead of compacting the free list after every line: a 250 m plan
+raster (577 k points) takes ~0.5 s instead of ~2 s.
 
 Determinism: every sum runs in a fixed order (plain IEEE operations, no fastmath), so a
 machine gives the same lines bit for bit run after run. Another machine (another libm
@@ -28,6 +31,10 @@ import numpy as np
 
 from .geometry import LineSet
 from .numba_support import njit
+
+# |normal component| below which a band is treated as parallel to a grid axis (its
+# interval along the other axis would be a division by ~0)
+_SLANT = 1e-6
 
 @njit
 def _dot(x0, x1, y0, y1):
@@ -76,12 +83,13 @@ def _first_at_or_after(cell_y, cell_x, cy, cx):
 
 
 @njit
-def _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, qx, qy, r2, taken, out):
+def free_points_in_ball(grid, qx, qy, r2, taken, out):
     """Points within sqrt(r2) of (qx, qy) that are not taken, in the grid order (see the
     module docstring), written to out; returns their count. Only the grid rows and columns
     the ball can reach are visited (one cell of margin on each side absorbs the rounding of
     the cell arithmetic; every point is then tested exactly), each row's cells being one
     consecutive run of the grid order."""
+    pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, _ = grid
     r = math.sqrt(r2)
     x0 = math.floor((qx - r - grid_origin[0]) / cell) - 1
     x1 = math.floor((qx + r - grid_origin[0]) / cell) + 1
@@ -104,13 +112,63 @@ def _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, qx, qy, r2
 
 
 @njit
-def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, max_iter, tol, rim, use_rim):
-    """The line grown over the first pn rows of pool_xy from the rows init_xy[init_idx[:init_m]],
-    anchored at the seed (the run of collinear points nearest it): the converged support
-    (sorted row indices), or an empty array when nothing grows. Converged: the support
-    stopped changing, or the refit moved the line by less than tol over the support's
-    extent. With use_rim, growth also stops, unconverged, once the support reaches farther
-    than rim from the seed (the caller regrows it over all free points)."""
+def free_points_in_band(grid, taken, nx, ny, cn, inlier, out):
+    """Points p not taken with |n . p - cn| <= inlier (the band around a line, n its unit
+    normal), sorted by index, written to out; returns their count. Only the cells the band
+    can cross are visited: per grid row, the band's x-interval over the row's y-span (one
+    cell of margin around both, for the rounding of the cell arithmetic), or the whole row
+    for a nearly horizontal band; rows are limited to the band's y-interval over the
+    cloud's x-extent for a band that is not nearly vertical. Each point is then tested
+    exactly as a scan of every free point would test it."""
+    pos_xy, tree_index, cell_y, cell_x, origin, cell, max_col = grid
+    n = pos_xy.shape[0]
+    lo_x = origin[0] - cell
+    hi_x = origin[0] + (max_col + 2) * cell
+    row_first = cell_y[0]
+    row_last = cell_y[n - 1]
+    if abs(ny) >= _SLANT:
+        ya = (cn - inlier - nx * lo_x) / ny
+        yb = (cn + inlier - nx * hi_x) / ny
+        yc = (cn + inlier - nx * lo_x) / ny
+        yd = (cn - inlier - nx * hi_x) / ny
+        row_first = max(row_first, math.floor((min(ya, yb, yc, yd) - origin[1]) / cell) - 1)
+        row_last = min(row_last, math.floor((max(ya, yb, yc, yd) - origin[1]) / cell) + 1)
+    count = 0
+    for row in range(row_first, row_last + 1):
+        if abs(nx) >= _SLANT:
+            y0 = origin[1] + (row - 1) * cell
+            y1 = origin[1] + (row + 2) * cell
+            xa = (cn - inlier - ny * y0) / nx
+            xb = (cn - inlier - ny * y1) / nx
+            xc = (cn + inlier - ny * y0) / nx
+            xd = (cn + inlier - ny * y1) / nx
+            first_col = max(math.floor((min(xa, xb, xc, xd) - origin[0]) / cell) - 1, 0)
+            last_col = min(math.floor((max(xa, xb, xc, xd) - origin[0]) / cell) + 1, max_col)
+            if first_col > last_col:
+                continue
+        else:
+            first_col = 0
+            last_col = max_col
+        start = _first_at_or_after(cell_y, cell_x, row, first_col)
+        stop = _first_at_or_after(cell_y, cell_x, row, last_col + 1)
+        for k in range(start, stop):
+            i = tree_index[k]
+            if not taken[i] and abs(_dot(pos_xy[k, 0], pos_xy[k, 1], nx, ny) - cn) <= inlier:
+                out[count] = i
+                count += 1
+    out[:count].sort()
+    return count
+
+
+@njit
+def _grow(xy, pn, grid, taken, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, max_iter, tol, rim, local):
+    """The line grown from the rows init_xy[init_idx[:init_m]], anchored at the seed (the run
+    of collinear points nearest it): the converged support (sorted row indices of xy), or
+    an empty array when nothing grows. Converged: the support stopped changing, or the
+    refit moved the line by less than tol over the support's extent. local: grow over the
+    first pn rows of xy (a window around the seed) and stop, unconverged, once the support
+    reaches farther than rim from the seed (the caller then regrows it); otherwise grow
+    over every free point (xy: all points, their band found on the grid)."""
     none = np.empty(0, np.int64)
     cx, cy, dx, dy = _pca_line(init_xy, init_idx, init_m)
     previous = none
@@ -120,16 +178,19 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
         nx = -dy
         ny = dx
         cn = _dot(cx, cy, nx, ny)
-        nc = 0
-        for k in range(pn):
-            if abs(_dot(pool_xy[k, 0], pool_xy[k, 1], nx, ny) - cn) <= inlier:
-                cand[nc] = k
-                nc += 1
+        if local:
+            nc = 0
+            for k in range(pn):
+                if abs(_dot(xy[k, 0], xy[k, 1], nx, ny) - cn) <= inlier:
+                    cand[nc] = k
+                    nc += 1
+        else:
+            nc = free_points_in_band(grid, taken, nx, ny, cn, inlier, cand)
         if nc < 2:
             return none
         cd = _dot(cx, cy, dx, dy)
         for k in range(nc):
-            t[k] = _dot(pool_xy[cand[k], 0], pool_xy[cand[k], 1], dx, dy) - cd
+            t[k] = _dot(xy[cand[k], 0], xy[cand[k], 1], dx, dy) - cd
         t_seed = _dot(seed_x - cx, seed_y - cy, dx, dy)
         # the run (consecutive spacing <= gap) of sorted t holding the value nearest
         # t_seed (a stable sort; order among ties cannot change the run, whose indices
@@ -159,9 +220,9 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
         previous = support
         t_lo = ts[lo]
         t_hi = ts[hi]
-        if use_rim and max(t_seed - t_lo, t_hi - t_seed) > rim:
+        if local and max(t_seed - t_lo, t_hi - t_seed) > rim:
             break
-        ncx, ncy, ndx, ndy = _pca_line(pool_xy, support, len(support))
+        ncx, ncy, ndx, ndy = _pca_line(xy, support, len(support))
         # largest displacement of the line over the support's extent after the refit
         shift = abs(_dot(ncx - cx, ncy - cy, nx, ny)) + 0.5 * (t_hi - t_lo) * abs(_dot(ndx, ndy, nx, ny))
         cx, cy, dx, dy = ncx, ncy, ndx, ndy
@@ -171,21 +232,12 @@ def _grow(pool_xy, pn, init_xy, init_idx, init_m, seed_x, seed_y, inlier, gap, m
 
 
 @njit
-def _extract(pts, perm, tree_index, cell_y, cell_x, grid_origin, cell, r_neigh2, r_local2, min_seed, rim, inlier, gap,
-             max_iter, tol, min_points, min_length):
+def _extract(pts, perm, grid, r_neigh2, r_local2, min_seed, rim, inlier, gap, max_iter, tol, min_points, min_length):
     """The seed loop: (normals, offsets, endpoints, support) of the accepted lines in the
-    order found (unsorted). tree_index: the points in grid order, cell_y / cell_x their
-    cells (_grid_order)."""
+    order found (unsorted). grid: point_grid(pts, neighbourhood_radius)."""
     n = pts.shape[0]
-    pos_xy = np.empty((n, 2))
-    for k in range(n):
-        pos_xy[k, 0] = pts[tree_index[k], 0]
-        pos_xy[k, 1] = pts[tree_index[k], 1]
     taken = np.zeros(n, np.bool_)
     tried = np.zeros(n, np.bool_)
-    pool = np.arange(n)  # indices of the free points, compacted after each accepted line
-    pool_xy = pts.copy()
-    pn = n
     neigh = np.empty(n, np.int64)
     window = np.empty(n, np.int64)
     window_xy = np.empty((n, 2))
@@ -200,14 +252,14 @@ def _extract(pts, perm, tree_index, cell_y, cell_x, grid_origin, cell, r_neigh2,
         tried[seed] = True
         sx = pts[seed, 0]
         sy = pts[seed, 1]
-        nn = _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, sx, sy, r_neigh2, taken, neigh)
+        nn = free_points_in_ball(grid, sx, sy, r_neigh2, taken, neigh)
         if nn < min_seed:
             continue  # isolated point: noise
-        nw = _free_ball(pos_xy, tree_index, cell_y, cell_x, grid_origin, cell, sx, sy, r_local2, taken, window)
+        nw = free_points_in_ball(grid, sx, sy, r_local2, taken, window)
         for k in range(nw):
             window_xy[k, 0] = pts[window[k], 0]
             window_xy[k, 1] = pts[window[k], 1]
-        support = _grow(window_xy, nw, pts, neigh, nn, sx, sy, inlier, gap, max_iter, tol, rim, True)
+        support = _grow(window_xy, nw, grid, taken, pts, neigh, nn, sx, sy, inlier, gap, max_iter, tol, rim, True)
         members = window[support]
         if len(support) > 0:
             reach = 0.0
@@ -216,8 +268,9 @@ def _extract(pts, perm, tree_index, cell_y, cell_x, grid_origin, cell, r_neigh2,
                 ey = pts[i, 1] - sy
                 reach = max(reach, ex * ex + ey * ey)
             if reach > rim * rim:  # reached the window's rim: regrow over all free points
-                support = _grow(pool_xy, pn, pts, members, len(members), sx, sy, inlier, gap, max_iter, tol, rim, False)
-                members = pool[support]
+                support = _grow(pts, n, grid, taken, pts, members, len(members), sx, sy, inlier, gap, max_iter, tol, rim,
+                                False)
+                members = support
         if len(support) == 0:
             tried[neigh[:nn]] = True  # nothing grows here: its neighbours would fail the same way
             continue
@@ -247,26 +300,19 @@ def _extract(pts, perm, tree_index, cell_y, cell_x, grid_origin, cell, r_neigh2,
         counts[found] = m
         found += 1
         taken[members] = True
-        kept = 0
-        for k in range(pn):
-            if not taken[pool[k]]:
-                pool[kept] = pool[k]
-                pool_xy[kept, 0] = pool_xy[k, 0]
-                pool_xy[kept, 1] = pool_xy[k, 1]
-                kept += 1
-        pn = kept
     return normals[:found].copy(), offsets[:found].copy(), ends[:found].copy(), counts[:found].copy()
 
 
-def _grid_order(pts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(order, cell_y, cell_x, origin): the points' indices sorted by grid cell (row-major,
-    side `cell`, from origin = the points' minimum), then by index, and each sorted point's
-    cell. Cells are int64 of the extent over the side: no dense grid, so a sparse cloud
-    over a large area costs nothing extra."""
+def point_grid(pts: np.ndarray, cell: float) -> tuple:
+    """The points sorted into grid cells (row-major, side `cell`, from the points' minimum),
+    then by index: (xy in that order, their indices, cell rows, cell columns, origin, cell,
+    last column), what the ball and band queries read. Cells are int64 coordinates, no
+    dense grid, so a sparse cloud over a large area costs nothing extra."""
     origin = pts.min(axis=0)
     cells = np.floor((pts - origin) / cell).astype(np.int64)
     order = np.lexsort((np.arange(len(pts)), cells[:, 0], cells[:, 1]))
-    return order, np.ascontiguousarray(cells[order, 1]), np.ascontiguousarray(cells[order, 0]), origin
+    return (np.ascontiguousarray(pts[order]), order, np.ascontiguousarray(cells[order, 1]),
+            np.ascontiguousarray(cells[order, 0]), origin, float(cell), int(cells[:, 0].max()))
 
 
 def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSet:
@@ -278,10 +324,8 @@ def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSe
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     perm = rng.permutation(n)
     s = settings
-    cell = s.neighbourhood_radius
-    order, cell_y, cell_x, origin = _grid_order(pts, cell)
     normals, offsets, ends, support = _extract(
-        pts, perm.astype(np.int64), order, cell_y, cell_x, origin, cell,
+        pts, perm.astype(np.int64), point_grid(pts, s.neighbourhood_radius),
         s.neighbourhood_radius * s.neighbourhood_radius, s.local_radius * s.local_radius, s.min_seed_neighbours,
         s.local_radius - s.gap, s.inlier_distance, s.gap, s.max_grow_iterations, s.converge_tolerance,
         s.min_points, s.min_length)
