@@ -180,25 +180,24 @@ def _check_fraction(meta: dict, key: str, source: str) -> float:
 
 
 def _segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
-    """(N, M) minimum distance between segments a (N) and b (M); 0 where they cross."""
+    """Minimum distance between segments a (a0 -> a1) and b, element-wise over arrays of
+    shape (..., 2) that broadcast together; 0 where they cross."""
 
-    def point_to_segment(p, s0, s1):  # p (N,1,2) or (1,M,2) broadcast with s (.., .., 2)
+    def point_to_segment(p, s0, s1):
         d = s1 - s0
         t = np.clip(np.sum((p - s0) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-18), 0.0, 1.0)
         return np.linalg.norm(p - (s0 + t[..., None] * d), axis=-1)
 
-    A0, A1 = a0[:, None, :], a1[:, None, :]
-    B0, B1 = b0[None, :, :], b1[None, :, :]
     dist = np.minimum.reduce(
-        [point_to_segment(A0, B0, B1), point_to_segment(A1, B0, B1), point_to_segment(B0, A0, A1), point_to_segment(B1, A0, A1)]
+        [point_to_segment(a0, b0, b1), point_to_segment(a1, b0, b1), point_to_segment(b0, a0, a1), point_to_segment(b1, a0, a1)]
     )
 
     def cross(u, v):
         return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
-    da, db = A1 - A0, B1 - B0
-    c1, c2 = cross(da, B0 - A0), cross(da, B1 - A0)
-    c3, c4 = cross(db, A0 - B0), cross(db, A1 - B0)
+    da, db = a1 - a0, b1 - b0
+    c1, c2 = cross(da, b0 - a0), cross(da, b1 - a0)
+    c3, c4 = cross(db, a0 - b0), cross(db, a1 - b0)
     crossing = (c1 * c2 < 0) & (c3 * c4 < 0)
     return np.where(crossing, 0.0, dist)
 
@@ -215,8 +214,11 @@ def _distance_field(occupied: np.ndarray, resolution: float) -> np.ndarray:
         from scipy import ndimage  # here: ~0.25 s that a CLI error must not pay
 
         return ndimage.distance_transform_edt(~occupied, sampling=resolution)
-    squared = np.rint(np.square(cells, dtype=np.float64))
-    return np.sqrt(squared) * resolution
+    field = np.square(cells, dtype=np.float64)  # in place from here: a large map's field is ~200 MB
+    np.rint(field, out=field)
+    np.sqrt(field, out=field)
+    field *= resolution
+    return field
 
 
 def blob_spans(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -380,11 +382,14 @@ class Floorplan:
         if size is not None:  # the extent budget before the pixels are decoded
             check_plan_budget(size[::-1], resolution, cfg, str(path))
         try:
-            img = _read_gray(image, cfg).astype(float)
+            img = _read_gray(image, cfg)  # uint8
         except FloorplanError as err:
             raise FloorplanError(f"{path}: {err}") from None
-        p = img / 255.0 if negate else (255.0 - img) / 255.0
-        occ = (p > occ_thresh)[::-1]  # image row 0 = largest y
+        # occupancy probability of each grey level (map_server's rule), looked up per pixel:
+        # the same test as on a float image, without ~200 MB of floats for a large map
+        level = np.arange(256, dtype=float)
+        occupied_level = (level / 255.0 if negate else (255.0 - level) / 255.0) > occ_thresh
+        occ = occupied_level[img][::-1]  # image row 0 = largest y
         return _named(path, cls, occ, resolution, origin, settings, path.stem)
 
     @classmethod
@@ -506,14 +511,23 @@ class Floorplan:
 
     @cached_property
     def line_neighbour_matrix(self) -> np.ndarray:
-        """(N, N) bool: segment-to-segment distance < neighbour_distance (diagonal False)."""
+        """(N, N) bool: segment-to-segment distance < neighbour_distance (diagonal False).
+        Only pairs whose bounding boxes come within that distance on both axes are measured
+        (a large plan's lines are mostly far apart), blocks of rows at a time."""
         e = self.lines.endpoints
         n = len(e)
+        reach = self.settings.floorplan.neighbour_distance
+        lo, hi = e.min(axis=1), e.max(axis=1)
         near = np.zeros((n, n), dtype=bool)
         block = 256  # rows per block: bounds the (block, N, 2) temporaries on big floorplans
         for i in range(0, n, block):
-            d = _segment_distances(e[i : i + block, 0], e[i : i + block, 1], e[:, 0], e[:, 1])
-            near[i : i + block] = d < self.settings.floorplan.neighbour_distance
+            # the boxes' gap along each axis bounds the segments' distance from below; the
+            # margin keeps a pair whose distance rounds to just under reach
+            gap = np.maximum(lo[None, :, :] - hi[i : i + block, None, :], lo[i : i + block, None, :] - hi[None, :, :])
+            rows, cols = np.nonzero(gap.max(axis=2) < reach * (1 + 1e-9) + 1e-9)
+            rows += i
+            d = _segment_distances(e[rows, 0], e[rows, 1], e[cols, 0], e[cols, 1])
+            near[rows, cols] = d < reach
         np.fill_diagonal(near, False)
         return near
 
