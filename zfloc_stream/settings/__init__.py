@@ -1,0 +1,2 @@
+"""The settings sections, one module per part of the package; zfloc_stream.config composes
+them into Settings and loads them (see config.py)."""

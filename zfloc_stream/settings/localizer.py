@@ -1,0 +1,68 @@
+"""Settings of the pipeline: when rounds run and where, the consistency monitor, the
+evidence a round needs (localizer.py)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from .base import Section, ordered
+
+
+class LocalizerSettings(Section):
+    every_k_frames: int = Field(5, ge=1, le=10_000)  # a RANSAC round every k fused frames
+    min_wall_points: int = Field(100, ge=1, le=10_000_000)  # BEV wall cells needed before the first round
+    min_primitives: int = Field(3, ge=1, le=1000)  # lines + circles needed before the first round
+    # Per-frame consistency monitor: while tracking, each fused frame's wall points are
+    # checked against the tracked alignment. A run of frames the map does not explain is
+    # a part of the building the floorplan lacks, clutter, or an odometry jump; the
+    # monitor cannot tell them apart on real sensors, so it never drops the track or the
+    # BEV: it makes the next round a full global search, and the tracker decides from
+    # relative evidence (a rival that explains the data better) whether the track is lost.
+    monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
+    monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
+    monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
+    monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
+    monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
+    # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
+    # alignment that fits all of it can sit off where the sensor is now. After each round
+    # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,
+    # its scale kept, a truncated Huber loss so walls the map lacks do not pull) on the wall
+    # hits of the last local_frames frames alone, continuing from the last accepted local
+    # fit; poses use it while it fits those hits at least as well.
+    local_frames: int = Field(10, ge=0, le=10_000)  # 0: off
+    local_max_step: float = Field(0.2, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
+    local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
+    local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
+    local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
+    # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
+    # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
+    release_memory: bool = True
+    # Where a round runs (localizer.py). online (default, the Localizer API and `run`): a
+    # round runs inline while no pose exists (the first pose lands at the frame whose round
+    # finds it, as inline gives it) and, once there is a pose, on one worker beside the
+    # stream, applied exactly join_delay frames later; whether a round is inline is decided
+    # by the state at its start frame, so a run replays bit for bit. inline: inside the push
+    # of the frame that starts it, applied at once (studies: offline, no latency to hide).
+    # pipelined: every round on the worker, applied join_delay frames later (push blocks
+    # there if the worker is late), so push costs about one fusion. delayed: computed inline
+    # but applied join_delay frames later: bit for bit what pipelined gives, without a worker.
+    pipeline: Literal["online", "inline", "pipelined", "delayed"] = "online"
+    # frames from a round's start to its result (online / pipelined / delayed); 0 = every_k_frames.
+    # 1: a round started at frame i is applied at frame i + 1, so a push blocks only when a
+    # round takes longer than one frame interval (~50-90 ms against 100 ms at 10 Hz). With
+    # every_k_frames (5) a correction landed 5 frames late and cost real-building and scene
+    # windows at #20 / #35 / #100 (docs/kernels.md); at 1 no length is below inline.
+    join_delay: int = Field(1, ge=0, le=10_000)
+    worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
+
+    _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
+
+    @property
+    def round_delay(self) -> int:
+        """Frames between the start of a round and the frame its result is applied at (online:
+        of the rounds that start once a pose exists; the others are inline)."""
+        if self.pipeline == "inline":
+            return 0
+        return self.join_delay or self.every_k_frames

@@ -1,0 +1,30 @@
+"""Settings of the floorplan and of the vector-plan loader (floorplan.py, vector_floorplan.py)."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from .base import Section
+
+
+class FloorplanSettings(Section):
+    neighbour_distance: float = Field(6.0, gt=0, le=1000)  # m, lines closer than this are spatial neighbours (3L pruning)
+    wall_sample_spacing: float = Field(0.2, gt=0, le=10)  # m, floorplan wall pixels used by Cv are subsampled to this (a ratio: 0.2 m is plenty, 16x cheaper than 0.05)
+    line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
+    image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
+    max_triplets: int = Field(2_000_000, ge=1, le=1_000_000_000)  # 3L table rows (~80 B each while built); a cluttered map past this keeps each line's nearest neighbours only (real maps: <= 0.5 M)
+    # Memory budget of one plan, checked before anything is allocated: cells of its raster
+    # (an image: read from the file's header), and cells of the estimator's search grid
+    # over its extent (estimator.correlative.cell): a wrong resolution or unit blows that up.
+    max_cells: int = Field(25_000_000, ge=1, le=2_000_000_000)
+
+
+class VectorFloorplanSettings(Section):
+    """DXF / SVG / GeoJSON floorplans: lines and circles come from the vectors; the
+    occupancy raster (distance field, Cv) is drawn from them at this resolution."""
+
+    resolution: float = Field(0.05, ge=0.005, le=10)  # m per raster cell
+    wall_thickness: float = Field(0.1, gt=0, le=10)  # m, a wall drawn as a line is rasterised this thick
+    solid_max_width: float = Field(0.6, ge=0, le=100)  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
+    margin: float = Field(1.0, ge=0, le=1000)  # m of free border around the drawing
+    max_cells: int = Field(25_000_000, ge=1, le=1_000_000_000)  # larger rasters are refused (a wrong unit scale, usually)
