@@ -146,3 +146,24 @@ def test_observation_jobs_on_threads_give_the_serial_observation():
         for x, y in zip(a.__dict__.values(), b.__dict__.values()):
             assert np.array_equal(x, y)
 
+
+
+def test_an_observation_without_circles_keeps_everything_else():
+    """A floorplan without pillars cannot match a BEV circle, so rounds ask for none
+    (circles=False): no circles, and the same lines, walls, free mask and clearance."""
+    from zfloc_stream.config import load_settings
+    from zfloc_stream.frontend.bev import RollingBEV
+    from zfloc_stream.rng import make_rng
+
+    scene = build_scene("office", seed=0)
+    bev = RollingBEV(load_settings())
+    for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:  # passes a pillar
+        bev.add(frame)
+    snapshot = bev.snapshot()
+    full = snapshot.observation(make_rng(0, "obs"))
+    lean = snapshot.observation(make_rng(0, "obs"), circles=False)
+    assert len(full.circles) >= 1 and len(lean.circles) == 0
+    for name in ("wall_points", "free", "clearance"):
+        assert np.array_equal(getattr(lean, name), getattr(full, name))
+    for x, y in zip(lean.lines.__dict__.values(), full.lines.__dict__.values()):
+        assert np.array_equal(x, y)

@@ -91,7 +91,8 @@ def _run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     out = RoundOutcome(job.index, None, None, tracked=job.tracked)
     t0, c0 = time.perf_counter(), time.thread_time()
     try:
-        obs = None if job.snapshot is None else job.snapshot.observation(make_rng(cfg.seed, "primitives", job.index))
+        obs = None if job.snapshot is None else job.snapshot.observation(make_rng(cfg.seed, "primitives", job.index),
+                                                                       circles=len(floorplan.circles) > 0)
         out.skipped = "too little evidence: nothing fused into the BEV yet" if obs is None else lacking_evidence(obs, cfg)
     except ZflocError as err:
         obs, out.skipped = None, f"primitive extraction failed: {err}"

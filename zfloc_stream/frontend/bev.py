@@ -36,7 +36,7 @@ from ..circle_fitting import circle_clusters, fit_circles
 from ..config import Settings
 from ..errors import ConfigError, FrameError, InputError
 from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
-from ..geometry import as_points
+from ..geometry import CircleSet, as_points
 from ..observation import BevObservation
 from ..primitives import extract_lines
 from ..rng import make_rng
@@ -440,9 +440,11 @@ class BevSnapshot:
         self.trajectory = trajectory
         self.settings = settings
 
-    def observation(self, rng: np.random.Generator) -> BevObservation:
+    def observation(self, rng: np.random.Generator, circles: bool = True) -> BevObservation:
         """The cropped grids (known cells plus bev.crop_margin), the wall points, the free
-        mask, the clearance f^v and the primitives. The grid passes are compiled
+        mask, the clearance f^v and the primitives; circles=False skips the circles (no
+        floorplan circle to match them: the pillar clustering is a round's largest
+        primitive cost on a plan without pillars). The grid passes are compiled
         (bev_grids.py: the element-wise tests in two passes, the clearance in a third
         around OpenCV's exact distance transform), so no full-grid temporaries are built."""
         b = self.settings.bev
@@ -473,12 +475,12 @@ class BevSnapshot:
         # extraction, whose draws come first; the circle fits
         # draw after it. The same observation as one thread gives.
         clusters, lines, clearance = threads.run(lambda job: job(), [
-            lambda: circle_clusters(as_points(points), prim.circles),
+            (lambda: circle_clusters(as_points(points), prim.circles)) if circles else (lambda: None),
             lambda: extract_lines(points, prim.lines, rng),
             free_clearance,
         ])
-        circles = fit_circles(clusters, prim.circles, rng)
-        return self._observation(points, origin, free, clearance, lines, circles)
+        found = fit_circles(clusters, prim.circles, rng) if circles else CircleSet.empty()
+        return self._observation(points, origin, free, clearance, lines, found)
 
     def _observation(self, points, origin, free, clearance, lines, circles) -> BevObservation:
         return BevObservation(
