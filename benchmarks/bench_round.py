@@ -141,7 +141,7 @@ from zfloc_stream.session import read_session
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-STAGES = ("fusion", "primitives", "model_estimation", "scoring", "refinement", "tracking", "round")
+STAGES = ("fusion", "primitives", "model_estimation", "scoring", "refinement", "tracking", "local_refinement", "round")
 
 
 def stage_times(floorplan, frames, settings) -> dict[str, tuple[list, list]]:

@@ -5,7 +5,8 @@ them) and the camera session intel-camera-30 (scale_mode prior, and free). Each 
 a fresh Localizer twice over the same frames: the first pass fills the per-floorplan
 caches (its first round is reported as "cold"), the second is measured (caches warm).
 Per round stage: median / p95 / max in ms; "round" is primitives + model estimation +
-scoring + refinement + tracking. Each case also splits its rounds into global ones (no
+scoring + refinement + tracking (the tracker update) + local_refinement (the tracked mode's
+alignment on the recent hits). Each case also splits its rounds into global ones (no
 mode confidently tracked: the full search, correlative seeding included) and tracked ones
 (estimator.ransac.tracking_iterations, no global search); the laser-*-300 cases are longer
 stretches (scans 100-400) where most rounds are tracked.
@@ -34,7 +35,7 @@ import numpy as np
 from zfloc_stream.localizer import Localizer
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking")
+STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking", "local_refinement")
 LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35),
          # optional (not in the default run)
          "laser-intel": ("intel", 400, 50), "laser-belgioioso": ("belgioioso", 150, 35), "laser-orebro": ("orebro", 100, 35),

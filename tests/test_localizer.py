@@ -9,7 +9,9 @@ import pytest
 
 from zfloc_stream.config import Settings
 from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
+from zfloc_stream.estimation.local_refinement import explained_share
 from zfloc_stream.localizer import Localizer
+from zfloc_stream.monitor import ConsistencyMonitor
 from zfloc_stream.rng import make_rng
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
@@ -264,10 +266,11 @@ def test_frame_consistency_at_the_monitor_min_consistency_boundary():
     assert est[-1].status == "tracking"
     cfg = loc.settings.localizer
     points = loc.bev.last_wall_hits
-    share = loc._explained(est[-1].alignment, points[:: max(1, len(points) // cfg.monitor_max_points)])
+    share = explained_share(scene.floorplan, est[-1].alignment, points[:: max(1, len(points) // cfg.monitor_max_points)],
+                            cfg.monitor_distance)
     assert 0.0 < share <= 1.0
     for threshold, consistent in ((share, True), (np.nextafter(share, 2.0), False)):
-        loc.settings = loc.settings.model_copy(update={"localizer": cfg.model_copy(update={"monitor_min_consistency": threshold})})
-        assert loc._frame_consistent(est[-1].alignment) is consistent
+        monitor = ConsistencyMonitor(scene.floorplan, cfg.model_copy(update={"monitor_min_consistency": threshold}))
+        assert monitor.frame_consistent(est[-1].alignment, points) is consistent
         status, confidence = loc.tracker.assess_frame(est[-1].alignment, loc.bev.plane_pose(frames[-1])[:2], consistent)
         assert (status, confidence > 0) == (("tracking", True) if consistent else ("lost", False))

@@ -4,11 +4,13 @@ and applied at the same frame ("delayed"); inline mode stays today's behaviour."
 
 from pathlib import Path
 
+import threading
+
 import numpy as np
 import pytest
 from test_localizer import _Kidnapped
 
-from zfloc_stream import localizer as localizer_module
+from zfloc_stream import round_scheduler as round_scheduler_module
 from zfloc_stream.config import load_settings
 from zfloc_stream.errors import ConfigError, InputError
 from zfloc_stream.localizer import Localizer
@@ -57,7 +59,7 @@ def test_pipelined_equals_delayed_inline_bit_for_bit(kidnapped_camera, delay):
     delayed = _run(floorplan, frames, _settings("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
     with Localizer(floorplan, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
         piped = [loc.push(f) for f in frames]
-        assert loc._force_seq >= 1  # the monitor's global-search request crossed a pending round
+        assert loc.rounds.global_search_requests >= 1  # the monitor's global-search request crossed a pending round
     assert [_bits(e) for e in piped] == [_bits(e) for e in delayed]
     assert delayed[-1].pose is not None
 
@@ -98,7 +100,7 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
     def refuse(*args, **kwargs):
         raise InputError("estimator refused this BEV")
 
-    monkeypatch.setattr(localizer_module, "localize", refuse)
+    monkeypatch.setattr(round_scheduler_module, "localize", refuse)
     est = _run(floorplan, frames[:15], settings)
     assert all(e.pose is None and e.status == "initializing" for e in est)
     # the reason lands on the join frame (round started at 4 -> 9, at 9 -> 14), nowhere else
@@ -108,7 +110,7 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
     def bug(*args, **kwargs):
         raise RuntimeError("a bug in the round")
 
-    monkeypatch.setattr(localizer_module, "localize", bug)
+    monkeypatch.setattr(round_scheduler_module, "localize", bug)
     with Localizer(floorplan, settings) as loc:
         for f in frames[:9]:  # round started at frame 4, joined at 9
             loc.push(f)
@@ -118,14 +120,18 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
 
 def test_close_stops_the_worker_and_drops_rounds_no_frame_reached(laser):
     floorplan, frames = laser
+    workers = _round_workers()  # other tests' localizers may still hold theirs
     loc = Localizer(floorplan, _settings("localizer.pipeline=pipelined", "localizer.join_delay=5"))
     for f in frames[:7]:  # round started at frame 4 would land at frame 9
         loc.push(f)
-    pool = loc._pool
-    assert pool is not None and len(loc._pending) == 1
+    assert loc.rounds.in_flight == 1 and _round_workers() == workers + 1
     loc.close()
-    assert loc._pool is None and not loc._pending and loc.last_round is None
-    assert pool._shutdown
+    assert loc.rounds.in_flight == 0 and loc.last_round is None and _round_workers() == workers
+
+
+def _round_workers() -> int:
+    """Live threads of the round worker (ThreadPoolExecutor names them zfloc-round_N)."""
+    return sum(t.name.startswith("zfloc-round") and t.is_alive() for t in threading.enumerate())
 
 
 def test_bad_pipeline_settings_are_one_config_error_line():

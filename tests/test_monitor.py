@@ -1,0 +1,98 @@
+"""The consistency monitor (monitor.py): each localizer.monitor_* setting at its boundary,
+just below and just above, on a floorplan whose wall distances are exact."""
+
+import numpy as np
+import pytest
+
+from zfloc_stream.config import Settings
+from zfloc_stream.estimation.local_refinement import explained_share
+from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.monitor import ConsistencyMonitor
+from zfloc_stream.sim2 import Sim2
+
+RES = 0.1  # m per cell
+IDENTITY = Sim2(1.0, 0.0, np.zeros(2))
+
+
+@pytest.fixture(scope="module")
+def plan():
+    """A 6 x 6 m room, walls one cell thick: a point at a cell centre k cells inside the
+    wall's face is k * RES from the nearest wall cell centre, exactly."""
+    occ = np.zeros((60, 60), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    return Floorplan.from_occupancy(occ, RES, (0.0, 0.0))
+
+
+def at_depth(plan, cells: int, n: int) -> np.ndarray:
+    """n points at cell centres `cells` cells from the bottom wall (spread along it)."""
+    cols = np.linspace(10, 49, n).round().astype(int)
+    return plan.cell_to_world(np.full(n, cells), cols)
+
+
+def monitor(plan, **settings) -> ConsistencyMonitor:
+    return ConsistencyMonitor(plan, Settings().localizer.model_copy(update=settings))
+
+
+def test_monitor_distance_is_the_reach_of_a_wall(plan):
+    hits = at_depth(plan, 3, 40)  # 0.3 m from the wall (cell centres: exactly 3 * RES)
+    d = float(plan.distance(hits)[0])
+    assert np.allclose(plan.distance(hits), d)
+    assert explained_share(plan, IDENTITY, hits, d) == 0.0  # "within": strictly closer
+    assert explained_share(plan, IDENTITY, hits, np.nextafter(d, 1.0)) == 1.0
+    base = dict(monitor_min_points=10, monitor_min_consistency=0.5)
+    assert monitor(plan, monitor_distance=d, **base).frame_consistent(IDENTITY, hits) is False
+    assert monitor(plan, monitor_distance=np.nextafter(d, 1.0), **base).frame_consistent(IDENTITY, hits) is True
+
+
+def test_monitor_min_consistency_is_the_share_a_frame_needs(plan):
+    hits = np.concatenate([at_depth(plan, 1, 30), at_depth(plan, 20, 10)])  # 75% near a wall
+    base = dict(monitor_min_points=10, monitor_distance=0.15)
+    assert monitor(plan, monitor_min_consistency=0.75, **base).frame_consistent(IDENTITY, hits) is True
+    assert monitor(plan, monitor_min_consistency=np.nextafter(0.75, 1.0), **base).frame_consistent(IDENTITY, hits) is False
+
+
+def test_monitor_min_points_is_the_fewest_hits_judged(plan):
+    hits = at_depth(plan, 20, 30)  # far from every wall: inconsistent when judged
+    assert monitor(plan, monitor_min_points=30).frame_consistent(IDENTITY, hits) is False
+    assert monitor(plan, monitor_min_points=31).frame_consistent(IDENTITY, hits) is None  # too few to judge
+
+
+def test_monitor_max_points_subsamples_evenly(plan):
+    near, far = at_depth(plan, 1, 2), at_depth(plan, 20, 2)
+    hits = np.stack([near[0], far[0], near[1], far[1]])  # every other hit explained
+    base = dict(monitor_min_points=1, monitor_distance=0.15, monitor_min_consistency=0.75)
+    # 3 or more: every hit checked (stride 4 // 3 = 1), half explained; 2: every second hit, all explained
+    assert monitor(plan, monitor_max_points=3, **base).frame_consistent(IDENTITY, hits) is False
+    assert monitor(plan, monitor_max_points=2, **base).frame_consistent(IDENTITY, hits) is True
+
+
+def test_monitor_frames_inconsistent_frames_in_a_row_ask_for_a_global_search(plan):
+    good, bad = at_depth(plan, 1, 40), at_depth(plan, 20, 40)
+    m = monitor(plan, monitor_frames=3, monitor_distance=0.15)
+    asks = [m.wants_global_search(True, IDENTITY, hits) for hits in (bad, bad, good, bad, bad, bad, bad)]
+    # a consistent frame restarts the run; the third in a row asks, and the run restarts
+    assert asks == [False, False, False, False, False, True, False]
+    m = monitor(plan, monitor_frames=4, monitor_distance=0.15)
+    assert not any(m.wants_global_search(True, IDENTITY, bad) for _ in range(3))
+    assert m.wants_global_search(True, IDENTITY, bad)
+
+
+def test_only_a_tracked_alignment_is_judged(plan):
+    bad = at_depth(plan, 20, 40)
+    m = monitor(plan, monitor_frames=1, monitor_distance=0.15)
+    assert not m.wants_global_search(False, None, bad)  # initializing, lost, ambiguous: nothing to check
+    assert m.inconsistent_frames == 0
+    assert m.wants_global_search(True, IDENTITY, bad)
+
+
+def test_the_same_frame_and_alignment_are_judged_once(plan, monkeypatch):
+    hits = at_depth(plan, 1, 40)
+    m = monitor(plan, monitor_distance=0.15)
+    calls = []
+    real = plan.distance
+    monkeypatch.setattr(plan, "distance", lambda p: calls.append(1) or real(p))
+    assert m.frame_consistent(IDENTITY, hits) is True
+    assert m.frame_consistent(IDENTITY, hits) is True  # the estimate asks after the monitor
+    assert len(calls) == 1
+    assert m.frame_consistent(IDENTITY, hits.copy()) is True  # another frame: judged again
+    assert len(calls) == 2
