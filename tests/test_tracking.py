@@ -9,6 +9,7 @@ from zfloc_stream.config import TrackingSettings
 from zfloc_stream.errors import InputError
 from zfloc_stream.rng import make_rng
 from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream import tracking_policy as policy
 from zfloc_stream.tracking import HypothesisTracker, anchored_state
 
 
@@ -79,7 +80,7 @@ def test_consistent_mode_converges_and_tracks():
     assert implied_error(best.alignment, TRUE, sensor_at(39)) < 0.1
     # Filtering averages the per-round noise: clearly better than one hypothesis.
     assert np.sqrt(np.mean(np.square(filtered_errors))) < 0.8 * np.sqrt(np.mean(np.square(raw_errors)))
-    assert best.weight == pytest.approx(1.0) and best.hits == 40 and best.age == 40
+    assert best.weight == pytest.approx(1.0) and best.hits == 40
     assert tracker.confidently_tracking
     assert tracker.warm_start()[0] == best.alignment and tracker.alternatives() == []
 
@@ -393,7 +394,7 @@ def test_a_tracked_mode_losing_its_dominance_is_ambiguous_and_keeps_its_place():
     # newcomers scoring as well as it (each its own mode, none confirmed yet) split the weight
     rivals = [Sim2(1.0, 0.3 * k, (10.0 * k, -5.0 * k)) for k in range(1, 4)]
     tracker.update([seen(TRUE, rng, 5, 0.8)] + [seen(a, rng, 5, 0.8) for a in rivals], sensor_at(5), frame=25)
-    assert not tracker.dominates(tracker.best) and tracker.best.weight <= 0.5
+    assert not policy.dominates(tracker.best, tracker.settings) and tracker.best.weight <= 0.5
     assert tracker.status == "ambiguous" and tracker.best.id == tracked
 
 
@@ -451,10 +452,10 @@ def test_assess_frame_never_upgrades_a_status_and_scales_confidence_by_confirmat
     assert np.isnan(HypothesisTracker().assess_frame(None, None, None)[1])
 
 
-@pytest.mark.parametrize("lost_rounds", [2, 3, 4])
-def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_lost_rounds_rounds(lost_rounds):
+@pytest.mark.parametrize("after_loss", [2, 3, 4])
+def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_confirm_rounds_after_loss_rounds(after_loss):
     rng = make_rng(8, "reacquire")
-    tracker = HypothesisTracker(TrackingSettings(lost_rounds=lost_rounds))
+    tracker = HypothesisTracker(TrackingSettings(confirm_rounds_after_loss=after_loss))
     run_rounds(tracker, 0, 6, lambda r: [seen(TRUE, rng, r, 0.8)])
     run_rounds(tracker, 6, 20, lambda r: [seen(FAR, rng, r, 0.7)])  # the old alignment vanishes
     assert tracker.status == "tracking"
@@ -464,7 +465,7 @@ def test_after_a_loss_a_new_mode_is_tracked_only_once_found_in_lost_rounds_round
         tracker.update([seen(FAR, rng, r, 0.7)], sensor_at(r), frame=5 * r)
         hits.append(tracker.best.hits)
         statuses.append(tracker.status)
-    required = max(lost_rounds, tracker.settings.confirm_rounds)
+    required = max(after_loss, tracker.settings.confirm_rounds)
     assert [s == "tracking" for s in statuses] == [h >= required for h in hits], (hits, statuses)
     assert "lost" in statuses and statuses[-1] == "tracking"
 
@@ -478,12 +479,12 @@ def test_a_mode_starts_tracking_only_when_no_rival_is_near_the_top_of_the_round(
     tracker = HypothesisTracker(TrackingSettings(dominance_weight=0.5))
     gap = tracker.settings.confirm_score_gap
     statuses = run_rounds(tracker, 0, 5, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.8 - gap - offset)])
-    assert tracker.dominates(tracker.best) and not tracker.has_close_rival(tracker.best)
-    assert tracker.singled_out(tracker.best) is tracked
+    assert policy.dominates(tracker.best, tracker.settings) and not policy.has_close_rival(tracker.best, tracker.modes, tracker.settings)
+    assert policy.singled_out(tracker.best, tracker.modes) is tracked
     assert ("tracking" in statuses) is tracked
     if tracked:  # once tracked, a rival near the top is the collapse rule's business
         tracker.update([seen(TRUE, rng, 5, 0.8), seen(FAR, rng, 5, 0.79)], sensor_at(5), frame=25)
-        assert not tracker.singled_out(tracker.best) and tracker.status == "tracking"
+        assert not policy.singled_out(tracker.best, tracker.modes) and tracker.status == "tracking"
 
 
 def test_confidence_above_dominance_weight_only_on_tracking_frames():

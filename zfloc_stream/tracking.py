@@ -18,13 +18,9 @@ Drift is a random walk in x whose variance grows with frames elapsed and metres 
 Weights come from an exponentially smoothed score per mode (fresh score when matched,
 running score - `unobserved_penalty` when not): w_i = softmax(weight_gain * running_score_i).
 
-Decisions are relative, never absolute score levels (those depend on the map's style):
-the round's best hypothesis always starts a mode (so the first round already gives a
-pose), others only within birth_score_gap of it; a mode is confirmed once it was found
-near the top in confirm_rounds rounds and tracked while no confirmed rival comes close
-and it holds more than dominance_weight of the weight; the tracked mode collapses in a round when a rival
-hypothesis beats it by lost_score_gap (or nothing matches it) and is lost after lost_rounds
-collapses in a row. Deterministic: no randomness, ties broken by input order.
+Decisions (birth, confirmation, collapse, loss, ambiguity, the reported mode) are
+the policy's, one named rule each (tracking_policy.py); this module keeps the filters and
+applies them. Deterministic: no randomness, ties broken by input order.
 """
 
 from __future__ import annotations
@@ -35,6 +31,7 @@ from typing import Protocol, Sequence
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from . import tracking_policy as policy
 from .config import TrackingSettings
 from .errors import InputError
 from .estimate import Alternative, Status
@@ -79,7 +76,6 @@ class Mode:
     score: float  # latest fresh score C = Cc - Cv
     running_score: float  # exponentially smoothed score, drives the weight
     weight: float = 0.0  # normalised over modes
-    age: int = 1  # rounds since birth (1 in the round it was born)
     hits: int = 1  # rounds in which it was found near the top (within confirm_score_gap of the round's best)
     collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
     tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
@@ -168,10 +164,9 @@ class HypothesisTracker:
         matched, explained = self._associate(meas)
         for mode in self.modes:
             self._score_mode(mode, matched.get(mode.id), meas, scores)
-            mode.age += 1
         for j in range(len(hyps)):
-            if not explained[j] and (j == 0 or scores[j] >= scores[0] - self.settings.birth_score_gap):
-                self._birth(meas[j], scores[j], sensor, near_top=scores[j] >= scores[0] - self.settings.confirm_score_gap)
+            if not explained[j] and policy.birth_rule(j, scores[j], scores[0], self.settings):
+                self._birth(meas[j], scores[j], sensor, near_top=policy.near_top(scores[j], scores[0], self.settings))
         self._merge()
         self._reweight_and_prune()
         self._update_status()
@@ -248,19 +243,18 @@ class HypothesisTracker:
         mode.near_top = False
         if j is None:
             fresh = mode.running_score - s.unobserved_penalty
-            # Unseen while the round found something: the evidence moved elsewhere.
-            mode.collapses = mode.collapses + 1 if len(scores) else mode.collapses
+            # unseen while the round found something: the evidence moved elsewhere (a round
+            # that found nothing leaves the count as it is)
+            mode.collapses += 1 if policy.collapse_rule(None, fresh, 0.0, len(scores) > 0, s) else 0
         else:
             fresh = float(scores[j])
             z = mode.kf.x.ravel() + self._residual(mode, meas[j])
             mode.kf.update(z.reshape(4, 1), R=self._meas_cov)
             mode.kf.x[2, 0] = wrap_angle(mode.kf.x[2, 0])
             mode.score = fresh
-            mode.near_top = fresh >= scores[0] - s.confirm_score_gap
+            mode.near_top = policy.near_top(fresh, scores[0], s)
             mode.hits += 1 if mode.near_top else 0
-            # scores[0] is another hypothesis whenever j > 0 (each matches one mode)
-            collapsed = j > 0 and scores[0] - fresh > s.lost_score_gap
-            mode.collapses = mode.collapses + 1 if collapsed else 0
+            mode.collapses = mode.collapses + 1 if policy.collapse_rule(j, fresh, scores[0], True, s) else 0
         mode.running_score = (1.0 - s.score_smoothing) * mode.running_score + s.score_smoothing * fresh
 
     def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray, near_top: bool = True) -> None:
@@ -291,7 +285,6 @@ class HypothesisTracker:
                 keep.append(mode)
             else:
                 twin.hits = max(twin.hits, mode.hits)
-                twin.age = max(twin.age, mode.age)
                 twin.tracked_rounds = max(twin.tracked_rounds, mode.tracked_rounds)
                 twin.near_top = twin.near_top or mode.near_top
                 if mode.id == self._tracked_id:
@@ -317,50 +310,15 @@ class HypothesisTracker:
             mode.weight = float(wi)
 
     # --- status -----------------------------------------------------------------------
-    # Each decision that may withhold `tracking` is one function below; _update_status
-    # (per round) and assess_frame (per frame) only combine them.
-    def is_confirmed(self, mode: Mode) -> bool:
-        """Re-found near the top of confirm_rounds rounds: one round's best is not yet evidence."""
-        return mode.hits >= self.settings.confirm_rounds
-
+    # The rules are tracking_policy's; _update_status (per round) and assess_frame (per
+    # frame) apply them.
     def rounds_to_track(self) -> int:
-        """Rounds a mode must have been re-found near the top before it is tracked:
-        confirm_rounds, and after a loss at least lost_rounds (the evidence it took to drop
-        a track is what it takes to trust the next one: right after a loss the map has
-        just shown it can fool the tracker; aces laser window 0 #100 re-acquired a mode
-        43 m off after two sightings and reported it `tracking` for 10 frames)."""
-        s = self.settings
-        return max(s.confirm_rounds, s.lost_rounds) if self._was_lost else s.confirm_rounds
-
-    def has_close_rival(self, leader: Mode) -> bool:
-        """Another confirmed mode carries at least ambiguity_ratio of the leader's weight:
-        two established explanations compete."""
-        return any(
-            m is not leader and self.is_confirmed(m) and m.weight >= self.settings.ambiguity_ratio * leader.weight
-            for m in self.modes
-        )
-
-    def singled_out(self, leader: Mode) -> bool:
-        """No other mode was found near the top of the latest round: the round points at
-        the leader alone. Asked only before a mode starts to be tracked (a tracked mode
-        meeting a rival near the top is the collapse rule's business). belgioioso camera
-        session: a mode 16 m off was confirmed in round 2 with a fresh score of 0.132
-        against a new rival's 0.125, its running score carried by round 1 alone."""
-        return not any(m is not leader and m.near_top for m in self.modes)
-
-    def dominates(self, leader: Mode) -> bool:
-        """The leader's share of the bank's weight exceeds dominance_weight (0.5: it
-        outweighs all its rivals together, confirmed or not). Many newcomers that each
-        score close to it mean the data do not single it out yet (held-out laser windows:
-        a reported mode 15-60 m off had 0.3-0.45 of the weight, spread over 8 modes)."""
-        return leader.weight > self.settings.dominance_weight
+        return policy.rounds_to_track(self._was_lost, self.settings)
 
     def _update_status(self) -> None:
-        s = self.settings
         tracked = self._mode_by_id(self._tracked_id)
         leader = self.best  # the tracked mode unless an established rival outweighs it
-        overtaken = tracked is not None and leader is not tracked
-        if self._tracked_id is not None and (tracked is None or tracked.collapses >= s.lost_rounds or overtaken):
+        if self._tracked_id is not None and policy.loss_rule(tracked, leader, self.settings):
             # The mode we were sure of stopped explaining the data while something else
             # did better: report lost. It leaves the bank only when a rival exists, so a
             # pose is always reported (the rival's, or the old one's while nothing else).
@@ -372,14 +330,15 @@ class HypothesisTracker:
             self._tracked_id, self._was_lost, self._status = None, True, "lost"
             return
         waiting: Status = "lost" if self._was_lost else "initializing"
-        if leader is None or leader.hits < self.rounds_to_track():
+        rule = policy.round_status_rule(leader, self.modes, self._tracked_id, self._was_lost, self.settings)
+        if rule == policy.WAITING_FOR_CONFIRMATION:
             self._tracked_id, self._status = None, waiting
-        elif self.has_close_rival(leader):
-            # A tracked mode stays the one reported (hysteresis) while a rival is only
-            # as good; before any mode was tracked, nothing is.
+        elif rule == policy.AMBIGUITY:
+            # a tracked mode stays the one reported (hysteresis) while a rival is only as
+            # good; before any mode was tracked, nothing is
             self._status = "ambiguous"
-        elif not self.dominates(leader) or (self._tracked_id != leader.id and not self.singled_out(leader)):
-            # thin evidence: a tracked mode keeps its place (as above), an untracked one waits
+        elif rule == policy.THIN_EVIDENCE:
+            # a tracked mode keeps its place (as above), an untracked one waits
             self._status = "ambiguous" if self._tracked_id is not None else waiting
         else:
             if self._tracked_id != leader.id:
@@ -394,7 +353,7 @@ class HypothesisTracker:
     def pose_jumped(self, previous: Sim2 | None, current: Sim2 | None, sensor_xy, mode: Mode | None = None) -> bool:
         """The reported pose of the sensor moved, beyond what odometry carries it, by more
         than the tracker allows: the change of the reported alignment at the sensor (x, y,
-        theta) lies outside gate_chi2 under the mode's pose covariance plus one
+        theta) lies outside pose_jump_chi2 under the mode's pose covariance plus one
         measurement's. The alignment only changes in a round (a gated filter update, or a
         switch to another mode) and in the local refinement; odometry moves the sensor in
         the plane and is carried by the alignment unchanged, so it never counts here."""
@@ -404,7 +363,7 @@ class HypothesisTracker:
         sensor = np.asarray(sensor_xy, dtype=float).reshape(2)
         step = np.append(current.apply(sensor) - previous.apply(sensor), wrap_angle(current.theta - previous.theta))
         cov = self.pose_covariance(sensor, mode=mode) + self._meas_cov[:3, :3]
-        return float(step @ np.linalg.solve(cov, step)) > self.settings.gate_chi2
+        return policy.pose_jumped(float(step @ np.linalg.solve(cov, step)), self.settings)
 
     def assess_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None) -> tuple[Status, float]:
         """(status, confidence) of one frame's reported pose.
@@ -466,25 +425,10 @@ class HypothesisTracker:
     # --- views ------------------------------------------------------------------------
     @property
     def best(self) -> Mode | None:
-        """The reported mode: the tracked mode while no established rival (found near the
-        top in lost_rounds rounds) outweighs it; else the heaviest confirmed mode, else
-        the heaviest mode."""
-        if not self.modes:
-            return None
-        s = self.settings
-        confirmed = [m for m in self.modes if m.hits >= s.confirm_rounds]
-        heaviest = max(confirmed or self.modes, key=lambda m: (tie_key(m.weight), -m.id))
-        tracked = self._mode_by_id(self._tracked_id)
-        if tracked is not None:
-            return tracked if heaviest is not tracked and heaviest.hits < s.lost_rounds else heaviest
-        # Nothing tracked (initializing, lost): the confirmed modes are the ones that kept
-        # failing to dominate; a new mode that explains the data clearly better (running
-        # score ahead by lost_score_gap, the same margin that makes a tracked mode
-        # collapse) is the better guess to report while it earns confirmation.
-        newcomer = max(self.modes, key=lambda m: (tie_key(m.weight), -m.id))
-        if newcomer.running_score - heaviest.running_score > s.lost_score_gap:
-            return newcomer
-        return heaviest
+        """The reported mode (tracking_policy.reported_mode): the tracked mode while no
+        established rival outweighs it; else the heaviest confirmed mode, else the
+        heaviest mode, or a newcomer clearly ahead of them."""
+        return policy.reported_mode(self.modes, self._mode_by_id(self._tracked_id), self.settings)[0]
 
     def alternatives(self) -> list[Mode]:
         """Every live mode except best, heaviest first."""

@@ -21,25 +21,33 @@ class TrackingSettings(Section):
     measurement_translation_std: float = Field(0.15, gt=0, le=100)  # m
     measurement_angle_deg: float = Field(2.0, gt=0, le=180)
     measurement_log_scale: float = Field(0.02, gt=0, le=10)
-    gate_chi2: float = Field(13.28, gt=0, le=1e6)  # Mahalanobis^2 gate, chi2(4 dof) at 99%
+    gate_chi2: float = Field(13.28, gt=0, le=1e6)  # association gate: Mahalanobis^2 of a hypothesis to a mode, chi2(4 dof) at 99%
     # weights = softmax(weight_gain * running score); running score = EMA of fresh scores.
     # Every decision below compares modes with each other or with the round's best
     # hypothesis: score levels differ between map styles (0.8+ on clean plans, -0.5..0.45
     # on maps built from other passes), score differences mean the same everywhere.
-    score_smoothing: float = Field(0.3, ge=0, le=1)  # EMA factor of a fresh score
-    unobserved_penalty: float = Field(0.5, ge=0, le=10)  # a mode nothing matched this round: fresh = running score - this
+    score_smoothing: float = Field(0.3, ge=0, le=1)  # EMA factor of a fresh score (0.3: a round's score is 30% of the running score)
+    # a mode nothing matched this round: fresh = running score - this. With the defaults an
+    # unseen mode's running score drops 0.15 per round against a rival that keeps its own,
+    # its weight 9.5x (exp(15 * 0.15)) per round: under prune_weight (0.001) after about 4
+    # unseen rounds from an even start
+    unobserved_penalty: float = Field(0.5, ge=0, le=10)
+    # weights = softmax(this * running score): 15 makes a running-score lead of 0.046 a
+    # weight ratio of 2 (ln 2 / 15), of 0.15 a ratio of 9.5
     weight_gain: float = Field(15.0, ge=0, le=1000)
     # births, pruning, merging
     birth_score_gap: float = Field(0.15, ge=0, le=10)  # an unmatched hypothesis within this of the round's best starts a mode (the best always does)
-    prune_weight: float = Field(0.001, ge=0, lt=1)
-    max_modes: int = Field(8, ge=1, le=1000)
+    prune_weight: float = Field(0.001, ge=0, lt=1)  # a mode under this share of the weight leaves the bank
+    max_modes: int = Field(8, ge=1, le=1000)  # at most this many modes, the heaviest kept
     merge_translation: float = Field(0.3, ge=0, le=100)  # m, implied sensor positions closer than this...
     merge_angle_deg: float = Field(5.0, ge=0, le=180)  # ...and headings closer than this...
     merge_log_scale: float = Field(0.05, ge=0, le=10)  # ...and log scales closer than this: one mode
     # status
     confirm_rounds: int = Field(2, ge=1, le=1000)  # rounds a mode was found near the top (within confirm_score_gap) before it can be tracked
     confirm_score_gap: float = Field(0.1, ge=0, le=10)  # "near the top": a fresh score within this of the round's best
-    ambiguity_ratio: float = Field(0.5, gt=0, le=1)  # a second confirmed mode with weight >= this * best: ambiguous
+    # a second confirmed mode with weight >= this * best: ambiguous. At weight_gain 15, 0.5
+    # means running scores within 0.046 (ln(1 / 0.5) / 15)
+    ambiguity_ratio: float = Field(0.5, gt=0, le=1)
     # tracking needs the best mode's share of the tracker's weight above this: 0.9 = its rivals
     # together hold under a tenth of it. At 0.5 (more than all rivals together) 2.9% of the
     # real laser windows' tracking frames were 1 m+ off (16 of 200 windows, rivals holding
@@ -47,4 +55,16 @@ class TrackingSettings(Section):
     dominance_weight: float = Field(0.9, ge=0, lt=1)
     lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
     lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)
+    # after a loss a mode needs this many hits (at least confirm_rounds) before it is tracked:
+    # the evidence it took to drop a track is what it takes to trust the next one
+    confirm_rounds_after_loss: int = Field(3, ge=1, le=1000)
+    # the tracked mode is reported (hysteresis) unless the heaviest confirmed mode is another
+    # one found near the top in this many rounds: then that one, and the tracked mode is lost
+    rival_established_rounds: int = Field(3, ge=1, le=1000)
+    # nothing tracked: a mode whose running score leads the heaviest confirmed mode's by more
+    # than this is reported while it earns confirmation (scores, as lost_score_gap)
+    newcomer_score_gap: float = Field(0.1, ge=0, le=10)
+    # a frame whose reported pose at the sensor moved by more than this Mahalanobis^2 (mode
+    # pose covariance + one measurement; chi2(3 dof) 13.28 is beyond 99.5%) is not `tracking`
+    pose_jump_chi2: float = Field(13.28, gt=0, le=1e6)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking

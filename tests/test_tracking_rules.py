@@ -1,0 +1,282 @@
+"""Every tracker setting at its boundary: just below and just above the value where the
+decision it governs flips. The policy's rules (tracking_policy.py) are tested as pure
+functions; the filter bank's numbers (gate, noises, weights, pruning, merging) through
+HypothesisTracker, with the expected value computed here the way the tracker defines it."""
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from zfloc_stream import tracking_policy as policy
+from zfloc_stream.config import TrackingSettings
+from zfloc_stream.sim2 import Sim2
+from zfloc_stream.tracking import HypothesisTracker, anchored_state
+
+S = TrackingSettings()
+
+
+def below(x: float) -> float:
+    return float(np.nextafter(x, -np.inf))
+
+
+def above(x: float) -> float:
+    return float(np.nextafter(x, np.inf))
+
+
+def mode(id=0, weight=0.5, running_score=0.5, hits=1, collapses=0, near_top=False):
+    return SimpleNamespace(id=id, weight=weight, running_score=running_score, hits=hits, collapses=collapses, near_top=near_top)
+
+
+# --- the policy's rules --------------------------------------------------------------------
+def test_birth_score_gap():
+    s = S.model_copy(update={"birth_score_gap": 0.25})
+    assert policy.birth_rule(0, -5.0, 0.5, s) == policy.BEST_STARTS_A_MODE  # the best always
+    assert policy.birth_rule(1, 0.25, 0.5, s) == policy.BIRTH_GAP
+    assert policy.birth_rule(1, below(0.25), 0.5, s) is None
+
+
+def test_confirm_score_gap():
+    s = S.model_copy(update={"confirm_score_gap": 0.25})
+    assert policy.near_top(0.25, 0.5, s) and not policy.near_top(below(0.25), 0.5, s)
+
+
+def test_lost_score_gap():
+    assert policy.collapse_rule(1, 0.25, 0.5, True, S.model_copy(update={"lost_score_gap": 0.25})) is None
+    assert policy.collapse_rule(1, 0.25, 0.5, True, S.model_copy(update={"lost_score_gap": below(0.25)})) == policy.BEATEN_BY_RIVAL
+    # the round's best itself never collapses; an unmatched mode does when the round found anything
+    assert policy.collapse_rule(0, -9.0, 0.5, True, S) is None
+    assert policy.collapse_rule(None, 0.0, 0.0, True, S) == policy.UNSEEN_COLLAPSES
+    assert policy.collapse_rule(None, 0.0, 0.0, False, S) is None
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_confirm_rounds(n):
+    s = S.model_copy(update={"confirm_rounds": n, "confirm_rounds_after_loss": 1})
+    assert policy.is_confirmed(mode(hits=n), s) and not policy.is_confirmed(mode(hits=n - 1), s)
+    assert policy.rounds_to_track(False, s) == n and policy.rounds_to_track(True, s) == n
+
+
+@pytest.mark.parametrize("n", [2, 3, 6])
+def test_confirm_rounds_after_loss(n):
+    s = S.model_copy(update={"confirm_rounds": 2, "confirm_rounds_after_loss": n})
+    assert policy.rounds_to_track(True, s) == n and policy.rounds_to_track(False, s) == 2
+    leader = mode(weight=0.95, hits=n)
+    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.TRACKING
+    leader.hits = n - 1
+    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.WAITING_FOR_CONFIRMATION
+
+
+def test_ambiguity_ratio():
+    leader, rival = mode(0, weight=0.5, hits=5), mode(1, weight=0.25, hits=5)
+    assert policy.has_close_rival(leader, [leader, rival], S.model_copy(update={"ambiguity_ratio": 0.5}))
+    assert not policy.has_close_rival(leader, [leader, rival], S.model_copy(update={"ambiguity_ratio": above(0.5)}))
+    unconfirmed = mode(1, weight=0.5, hits=1)  # only a confirmed rival makes the leader ambiguous
+    assert not policy.has_close_rival(leader, [leader, unconfirmed], S)
+
+
+def test_dominance_weight():
+    leader = mode(weight=0.9, hits=5)
+    assert not policy.dominates(leader, S.model_copy(update={"dominance_weight": 0.9}))
+    assert policy.dominates(leader, S.model_copy(update={"dominance_weight": below(0.9)}))
+    s = S.model_copy(update={"dominance_weight": 0.9})
+    assert policy.round_status_rule(leader, [leader], None, False, s) == policy.THIN_EVIDENCE
+
+
+def test_a_mode_not_yet_tracked_must_be_singled_out_by_the_round():
+    leader, rival = mode(0, weight=0.95, hits=5), mode(1, weight=0.05, near_top=True)
+    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.THIN_EVIDENCE
+    assert policy.round_status_rule(leader, [leader, rival], 0, False, S) == policy.TRACKING  # already tracked
+    rival.near_top = False
+    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.TRACKING
+
+
+@pytest.mark.parametrize("n", [1, 3, 4])
+def test_lost_rounds(n):
+    s = S.model_copy(update={"lost_rounds": n})
+    tracked = mode(collapses=n)
+    assert policy.loss_rule(tracked, tracked, s) == policy.COLLAPSED
+    tracked.collapses = n - 1
+    assert policy.loss_rule(tracked, tracked, s) is None
+    assert policy.loss_rule(tracked, mode(1), s) == policy.OVERTAKEN
+    assert policy.loss_rule(None, None, s) == policy.PRUNED
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_rival_established_rounds(n):
+    s = S.model_copy(update={"rival_established_rounds": n, "confirm_rounds": 1})
+    tracked, rival = mode(0, weight=0.3, hits=9), mode(1, weight=0.7, hits=n)
+    assert policy.reported_mode([tracked, rival], tracked, s) == (rival, policy.OVERTAKEN)
+    rival.hits = n - 1
+    assert policy.reported_mode([tracked, rival], tracked, s) == (tracked, policy.TRACKED_KEEPS_ITS_PLACE)
+
+
+def test_newcomer_score_gap():
+    confirmed, newcomer = mode(0, weight=0.3, running_score=0.25, hits=5), mode(1, weight=0.7, running_score=0.5, hits=1)
+    s = S.model_copy(update={"newcomer_score_gap": 0.25})
+    assert policy.reported_mode([confirmed, newcomer], None, s) == (confirmed, None)
+    s = S.model_copy(update={"newcomer_score_gap": below(0.25)})
+    assert policy.reported_mode([confirmed, newcomer], None, s) == (newcomer, policy.NEWCOMER)
+
+
+def test_pose_jump_chi2():
+    s = S.model_copy(update={"pose_jump_chi2": 10.0})
+    assert not policy.pose_jumped(10.0, s) and policy.pose_jumped(above(10.0), s)
+
+
+# --- the filter bank -----------------------------------------------------------------------
+@dataclass
+class Hyp:
+    alignment: Sim2
+    score: float
+
+
+SENSOR_A, SENSOR_B = np.array([5.0, 2.0]), np.array([8.0, 6.0])
+BASE = Sim2(1.0, 0.3, (1.0, -2.0))
+NOISES = ["process_translation_std_per_frame", "process_angle_deg_per_frame", "process_log_scale_per_frame",
+          "process_translation_std_per_m", "process_angle_deg_per_m", "process_log_scale_per_m",
+          "measurement_translation_std", "measurement_angle_deg", "measurement_log_scale"]
+NO_MERGE = {"merge_translation": 0.0, "merge_angle_deg": 0.0, "merge_log_scale": 0.0}
+
+
+def shifted(alignment: Sim2, sensor, dq=(0.0, 0.0), dtheta=0.0, dlog_s=0.0) -> Sim2:
+    """The alignment whose anchored state about `sensor` differs by (dq, dtheta, dlog_s)."""
+    s, theta = alignment.s * np.exp(dlog_s), alignment.theta + dtheta
+    q = alignment.apply(sensor) + np.asarray(dq)
+    return Sim2(s, theta, q - s * Sim2(1.0, theta).R @ sensor)
+
+
+def gate_distance(settings: TrackingSettings, z_new: Sim2) -> float:
+    """Mahalanobis^2 of a round-2 hypothesis (at SENSOR_B, 3 frames later) to the mode born
+    from BASE at SENSOR_A in round 1: the tracker's prediction, written out."""
+    s = settings
+    meas = np.diag([s.measurement_translation_std**2] * 2 + [np.deg2rad(s.measurement_angle_deg) ** 2, s.measurement_log_scale**2])
+    x = anchored_state(BASE, SENSOR_A)
+    offset = SENSOR_B - SENSOR_A
+    scaled_r = np.exp(x[3]) * Sim2(1.0, x[2]).R
+    jac = np.eye(4)
+    jac[:2, 2] = scaled_r @ np.array([-offset[1], offset[0]])
+    jac[:2, 3] = scaled_r @ offset
+    frames, metres = 3, float(np.linalg.norm(offset))
+    q = np.diag([frames * s.process_translation_std_per_frame**2 + metres * s.process_translation_std_per_m**2] * 2
+                + [frames * np.deg2rad(s.process_angle_deg_per_frame) ** 2 + metres * np.deg2rad(s.process_angle_deg_per_m) ** 2,
+                   frames * s.process_log_scale_per_frame**2 + metres * s.process_log_scale_per_m**2])
+    x_pred = x.copy()
+    x_pred[:2] += scaled_r @ offset
+    y = anchored_state(z_new, SENSOR_B) - x_pred
+    return float(y @ np.linalg.solve(jac @ meas @ jac.T + q + meas, y))
+
+
+def modes_after_second_round(settings: TrackingSettings, z_new: Sim2) -> int:
+    """1: the round-2 hypothesis gated with the mode (matched); 2: it started its own."""
+    tracker = HypothesisTracker(settings)
+    tracker.update([Hyp(BASE, 0.5)], SENSOR_A, frame=0)
+    tracker.update([Hyp(z_new, 0.5)], SENSOR_B, frame=3)
+    return len(tracker.modes)
+
+
+OFF = shifted(BASE, SENSOR_B, dq=(0.9, -0.4), dtheta=0.03, dlog_s=0.02)  # a hypothesis near the gate's edge
+# for each noise, a hypothesis off in the component it widens (beyond the default gate)
+OFF_IN = {"translation": shifted(BASE, SENSOR_B, dq=(1.5, 0.0)), "angle": shifted(BASE, SENSOR_B, dtheta=0.3),
+          "log_scale": shifted(BASE, SENSOR_B, dlog_s=0.2)}
+
+
+def test_the_written_out_gate_distance_is_the_trackers():
+    s = S.model_copy(update=NO_MERGE)
+    d2 = gate_distance(s, OFF)
+    assert modes_after_second_round(s.model_copy(update={"gate_chi2": d2 * (1 + 1e-9)}), OFF) == 1
+    assert modes_after_second_round(s.model_copy(update={"gate_chi2": d2 * (1 - 1e-9)}), OFF) == 2
+
+
+@pytest.mark.parametrize("name", NOISES)
+def test_each_noise_at_the_value_that_puts_the_hypothesis_on_the_gate(name):
+    """Every noise widens the gate: find (bisection) the value at which a hypothesis off in
+    that component sits exactly on gate_chi2; just below it starts a mode, just above it is
+    matched."""
+    base = S.model_copy(update=NO_MERGE)
+    off = OFF_IN[next(k for k in OFF_IN if k in name)]
+    lo, hi = (1e-4 if name.startswith("measurement") else 0.0), 50.0 * max(getattr(base, name), 1e-3)
+    value = lambda v: base.model_copy(update={name: v})  # noqa: E731
+    assert gate_distance(value(lo), off) > base.gate_chi2 > gate_distance(value(hi), off)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if gate_distance(value(mid), off) > base.gate_chi2 else (lo, mid)
+    assert modes_after_second_round(value(lo * (1 - 1e-6)), off) == 2
+    assert modes_after_second_round(value(hi * (1 + 1e-6)), off) == 1
+
+
+def two_modes_then_one_unseen(settings: TrackingSettings) -> tuple[HypothesisTracker, float]:
+    """Round 1: A (score 0.6) and B (0.5), far apart; round 2: only A, fresh 0.7. Returns the
+    tracker and B's expected weight after round 2, computed as the tracker defines it."""
+    s = settings
+    far = Sim2(1.0, 2.0, (40.0, -30.0))
+    tracker = HypothesisTracker(s)
+    tracker.update([Hyp(BASE, 0.6), Hyp(far, 0.5)], SENSOR_A, frame=0)
+    tracker.update([Hyp(BASE, 0.7)], SENSOR_A, frame=5)
+    running_a = (1.0 - s.score_smoothing) * 0.6 + s.score_smoothing * 0.7
+    running_b = (1.0 - s.score_smoothing) * 0.5 + s.score_smoothing * (0.5 - s.unobserved_penalty)
+    logits = s.weight_gain * np.array([running_a, running_b])
+    w = np.exp(logits - logits.max())
+    w /= w.sum()
+    return tracker, float(w[1])
+
+
+def test_prune_weight():
+    _, w_b = two_modes_then_one_unseen(S)
+    assert len(two_modes_then_one_unseen(S.model_copy(update={"prune_weight": w_b}))[0].modes) == 2
+    assert len(two_modes_then_one_unseen(S.model_copy(update={"prune_weight": above(w_b)}))[0].modes) == 1
+
+
+@pytest.mark.parametrize("name", ["score_smoothing", "unobserved_penalty", "weight_gain"])
+def test_each_weight_setting_at_the_value_that_prunes_the_unseen_mode(name):
+    """B's weight falls with each of these; at prune_weight 0.01 find (bisection) the value
+    where it equals prune_weight: just below B stays, just above it is pruned."""
+    base = S.model_copy(update={"prune_weight": 0.01})
+    value = lambda v: base.model_copy(update={name: v})  # noqa: E731
+    lo, hi = 1e-3, {"score_smoothing": 1.0, "unobserved_penalty": 10.0, "weight_gain": 1000.0}[name]
+    assert two_modes_then_one_unseen(value(lo))[1] > 0.01 > two_modes_then_one_unseen(value(hi))[1]
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if two_modes_then_one_unseen(value(mid))[1] > 0.01 else (lo, mid)
+    assert len(two_modes_then_one_unseen(value(lo * (1 - 1e-6)))[0].modes) == 2
+    assert len(two_modes_then_one_unseen(value(min(hi * (1 + 1e-6), hi + 1e-9)))[0].modes) == 1
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_max_modes(n):
+    """n + 1 hypotheses far apart, all within birth_score_gap: max_modes of them stay."""
+    hyps = [Hyp(Sim2(1.0, 0.5 * k, (30.0 * k, 0.0)), 0.5 - 0.01 * k) for k in range(n + 1)]
+    for limit, kept in ((n + 1, n + 1), (n, n)):
+        tracker = HypothesisTracker(S.model_copy(update={"max_modes": limit}))
+        tracker.update(hyps, SENSOR_A, frame=0)
+        assert len(tracker.modes) == kept
+
+
+@pytest.mark.parametrize("name, delta", [("merge_translation", {"dq": (0.25, 0.0)}),
+                                         ("merge_angle_deg", {"dtheta": np.deg2rad(4.0)}),
+                                         ("merge_log_scale", {"dlog_s": 0.04})])
+def test_merge_limits(name, delta):
+    """Two hypotheses of one round implying sensor poses that differ in one component only:
+    one mode when that difference is within the limit (<=), two just below it."""
+    twin = shifted(BASE, SENSOR_A, **delta)
+    d = anchored_state(twin, SENSOR_A) - anchored_state(BASE, SENSOR_A)
+    gap = {"merge_translation": float(np.hypot(d[0], d[1])), "merge_angle_deg": abs(d[2]), "merge_log_scale": abs(d[3])}[name]
+    limit = np.rad2deg(gap) if name == "merge_angle_deg" else gap
+    for setting, modes in ((limit * (1 + 1e-9), 1), (limit * (1 - 1e-9), 2)):
+        tracker = HypothesisTracker(S.model_copy(update={name: setting}))
+        tracker.update([Hyp(BASE, 0.5), Hyp(twin, 0.49)], SENSOR_A, frame=0)
+        assert len(tracker.modes) == modes
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_confident_rounds(n):
+    """confidently_tracking after exactly confident_rounds tracked rounds of one mode."""
+    tracker = HypothesisTracker(S.model_copy(update={"confident_rounds": n}))
+    tracked, confident = [], []
+    for r in range(12):
+        tracker.update([Hyp(BASE, 0.6)], SENSOR_A, frame=5 * r)
+        tracked.append(tracker.status == "tracking")
+        confident.append(tracker.confidently_tracking)
+    first = tracked.index(True)
+    assert confident == [r >= first + n - 1 for r in range(12)]
