@@ -6,6 +6,7 @@ import pytest
 
 from zfloc_stream.estimation import correlative as C
 from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
+from zfloc_stream.sim2 import Sim2, wrap_angle
 
 LASER = LaserSimSettings(fov_deg=180.0, n_beams=180, max_range=10.0)
 
@@ -199,3 +200,25 @@ def test_peak_picking_refuses_what_it_cannot_vouch_for():
         assert not C._pick(broken, 30, 3, 0.25)[2]
     best, counts, ok = C._pick(score, 8, 2, 0.25)  # the columns past n_j are ignored, not read as placements
     assert ok and np.array_equal(best, [4 * 8 + 7, 11 * 8 + 2]) and np.array_equal(counts, [9.0, 8.0])
+
+
+def test_chosen_placements_are_pairwise_distinct_by_the_settings():
+    """estimator.correlative.distinct_distance / distinct_angle_deg: every two chosen models
+    differ by more than one of them; at the measured gap of the closest pair the pair
+    is no longer distinct."""
+    scene = build_scene("office", seed=0)
+    points = _points(scene, 8, 0)
+    kw = dict(cell=0.25, angle_step_deg=8.0, tolerance=0.3, peaks=10)
+    models = C.correlative_models(scene.floorplan, points, **kw)
+    centre = C.thin_to_grid(points, 0.25).mean(axis=0)
+    assert len(models) == 10
+    near = min(
+        (float(np.hypot(*(Sim2(1.0, a[2], a[:2]).apply(centre) - Sim2(1.0, b[2], b[:2]).apply(centre)))), i, j)
+        for i, a in enumerate(models) for j, b in enumerate(models) if i < j
+        and abs(wrap_angle(a[2] - b[2])) <= np.deg2rad(10.0)
+    )
+    assert near[0] > 1.0
+    closer = C.correlative_models(scene.floorplan, points, **kw, distinct_distance=near[0] * (1 + 1e-6))
+    assert not np.array_equal(closer, models)  # that pair is one placement now
+    lone = C.correlative_models(scene.floorplan, points, **kw, distinct_distance=1e3, distinct_angle_deg=180.0)
+    assert len(lone) == 1 and np.array_equal(lone[0], models[0])

@@ -221,7 +221,7 @@ def test_refinement_converges_without_scale_bias(plain):
     """From a perturbed start the LM + Huber refinement (on the wall-surface field) lands on
     the true alignment; with the plain f^c (0 inside thick walls) BEV walls could slide
     into the walls and inflate the scale."""
-    from zfloc_stream.estimation.refine import refine
+    from zfloc_stream.field_fit import refine
     from zfloc_stream.estimation.scoring import floorplan_scorer
 
     fp, truth, obs = plain
@@ -241,7 +241,7 @@ def test_truncated_loss_ignores_walls_the_map_lacks():
     # that the map lacks. Plain Huber lets those points pull the fit; with
     # refine.outlier_distance they carry no weight and the true alignment stays put.
     from zfloc_stream.config import RefineSettings
-    from zfloc_stream.estimation.refine import refine_batch
+    from zfloc_stream.field_fit import refine_batch
     from zfloc_stream.floorplan import Floorplan
 
     res = 0.05

@@ -9,7 +9,7 @@ import pytest
 from test_scoring import building, observe  # synthetic floorplan + BEV helpers
 
 from zfloc_stream.config import RefineSettings
-from zfloc_stream.estimation.refine import refine_batch
+from zfloc_stream.field_fit import refine_batch
 from zfloc_stream.estimation.scoring import FaceField
 from zfloc_stream.sim2 import Sim2
 

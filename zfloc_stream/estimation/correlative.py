@@ -26,7 +26,7 @@ from ..errors import InputError
 from ..geometry import LineSet
 from ..numba_support import njit
 from ..sim2 import Sim2, wrap_angle
-from .refine import refine_batch
+from ..field_fit import refine_batch
 
 
 @dataclass(frozen=True)
@@ -228,9 +228,12 @@ def correlative_models(
     tolerance: float = 0.15,
     peaks: int = 8,
     angles: np.ndarray | None = None,
+    distinct_distance: float = 1.0,
+    distinct_angle_deg: float = 10.0,
 ) -> np.ndarray:
     """(K <= peaks, 4) models (tx, ty, theta, s = scale), best grid count first, pairwise
-    distinct (1 m at the points' centre, or 10 deg).
+    distinct (farther than distinct_distance metres apart at the points' centre, or more
+    than distinct_angle_deg apart: estimator.correlative's).
 
     angles: a boolean mask over the angle grid (plausible_angles); the others are not
     searched (None: all).
@@ -258,11 +261,11 @@ def correlative_models(
     # angle a + half_turn is angle a turned by 180 degrees (searched as a pair)
     half_turn = n_angles // 2 if n_angles % 2 == 0 and np.isclose(thetas_grid[n_angles // 2], np.pi) else 0
     found = search_angles(spectrum, local, thetas_grid, searched, half_turn, cell, half, n_i, n_j, per_angle)
-    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
+    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks, distinct_distance, distinct_angle_deg)
     return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
 
 
-def _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks):
+def _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks, distinct_distance, distinct_angle_deg):
     """Greedy non-maximum suppression over every angle's peaks (best count first; ties
     by angle, then position, CPU-independent): (translations, angles) of the chosen ones
     and the count of the last one chosen."""
@@ -278,7 +281,8 @@ def _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks):
     chosen: list[int] = []
     for k in order:  # greedy non-maximum suppression on the centre's image and the angle
         far = all(
-            np.hypot(*(corners[k] - corners[q])) > 1.0 or abs(wrap_angle(thetas[k] - thetas[q])) > np.deg2rad(10) for q in chosen
+            np.hypot(*(corners[k] - corners[q])) > distinct_distance or abs(wrap_angle(thetas[k] - thetas[q])) > np.deg2rad(distinct_angle_deg)
+            for q in chosen
         )
         if far:
             chosen.append(int(k))
@@ -298,6 +302,8 @@ def correlative_models_reference(
     angle_step_deg: float = 2.0,
     tolerance: float = 0.15,
     peaks: int = 8,
+    distinct_distance: float = 1.0,
+    distinct_angle_deg: float = 10.0,
 ) -> np.ndarray:
     """correlative_models the plain way (one float64 FFT per angle, every placement counted):
     what the fast version must reproduce exactly (tests, benchmarks)."""
@@ -314,7 +320,7 @@ def correlative_models_reference(
     per_angle = max(1, peaks)
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
     found = [_exact_peaks(spectrum, _angle_template(local, th, cell, half), n_i, n_j, per_angle) for th in thetas_grid]
-    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks)
+    (t, thetas), _ = _select(found, thetas_grid, centre, mask_origin, half, cell, n_j, peaks, distinct_distance, distinct_angle_deg)
     return np.column_stack([t, wrap_angle(thetas), np.full(len(thetas), float(scale))])
 
 

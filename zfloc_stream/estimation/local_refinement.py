@@ -20,7 +20,7 @@ from ..settings.estimation import EstimatorSettings
 from ..settings.localizer import LocalizerSettings
 from ..sim2 import Sim2
 from .ransac import alignment_of, model_rows
-from .refine import refine_batch
+from ..field_fit import refine_batch
 from .scoring import floorplan_scorer
 
 

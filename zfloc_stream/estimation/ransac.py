@@ -55,7 +55,7 @@ from ..primitives import deduplicate_lines
 from ..sim2 import Sim2, wrap_angle
 from .correlative import correlative_models, plausible_angles
 from ..ties import descending, tie_keys
-from .refine import refine_batch
+from ..field_fit import refine_batch
 from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .views import BevView, implied_poses
 from .draws import admissible_triplets, draw
@@ -477,7 +477,7 @@ def _correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, s
     angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
     models = correlative_models(
         floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
-        peaks=c.peaks, angles=angles,
+        peaks=c.peaks, angles=angles, distinct_distance=c.distinct_distance, distinct_angle_deg=c.distinct_angle_deg,
     )
     if len(models) == 0:
         return np.zeros((0, 4))

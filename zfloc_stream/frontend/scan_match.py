@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from ..config import BevSettings, RefineSettings
-from ..estimation.refine import field_value_and_gradient, huber_cost, refine_batch, thin_points
+from ..field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,12 @@ class GridField:
     origin: np.ndarray
     resolution: float
 
+
+# The fit's loss in units of scan_match_inlier_distance: quadratic (Huber) up to half of
+# it, so a hit on a wall pulls in proportion to its miss; a hit beyond twice it is furniture
+# or a wall the BEV has not seen yet and does not pull at all.
+HUBER_DELTA_PER_INLIER = 0.5
+OUTLIER_PER_INLIER = 2.0
 
 def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float, hits: np.ndarray,
                centre: np.ndarray, settings: BevSettings) -> tuple[float, np.ndarray] | None:
@@ -52,8 +58,8 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     grid = GridField(field.astype(np.float64) * resolution, np.asarray(crop_origin, float) - centre, resolution)
     points = thin_points(hits - centre, settings.scan_match_max_points)
     near = settings.scan_match_inlier_distance
-    refine = RefineSettings(huber_delta=0.5 * near, outlier_distance=2 * near, max_points=settings.scan_match_max_points,
-                            max_evaluations=15)  # a one-frame step from a good start converges in a few
+    refine = RefineSettings(huber_delta=HUBER_DELTA_PER_INLIER * near, outlier_distance=OUTLIER_PER_INLIER * near,
+                            max_points=settings.scan_match_max_points, max_evaluations=settings.scan_match_max_evaluations)
     model = refine_batch(grid, points, np.array([[0.0, 0.0, 0.0, 1.0]]), refine, "fixed")[0]
     dt, dtheta = model[:2], float(model[2])
     if not np.isfinite(model).all() or np.hypot(*dt) > settings.scan_match_max_shift or abs(dtheta) > np.deg2rad(settings.scan_match_max_angle_deg):

@@ -133,6 +133,9 @@ class CorrelativeSettings(Section):
     angle_step_deg: float = Field(4.0, ge=0.1, le=90)  # rotation grid
     tolerance: float = Field(0.3, gt=0, le=10)  # m, a point within this of a wall counts (coarse grid: about cell + LM basin)
     peaks: int = Field(10, ge=1, le=1000)  # distinct placements refined and added to the hypotheses
+    # two placements are distinct when the BEV's centre lands farther apart than this...
+    distinct_distance: float = Field(1.0, gt=0, le=1000)  # m
+    distinct_angle_deg: float = Field(10.0, gt=0, le=180)  # ...or their rotations differ by more than this
     # Rotations whose line-direction agreement with the floorplan (length-weighted
     # direction histograms, correlative.plausible_angles) is below this fraction of the
     # best rotation's are not searched: on a building whose walls run in two directions

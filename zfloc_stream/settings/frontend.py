@@ -108,6 +108,7 @@ class BevSettings(Section):
     scan_match: Literal["none", "laser", "all"] = "laser"
     scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
     scan_match_max_points: int = Field(200, ge=10, le=1_000_000)  # hits used (evenly thinned)
+    scan_match_max_evaluations: int = Field(15, ge=1, le=10_000)  # LM cost evaluations per frame (a one-frame step from a good start converges in a few)
     scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
     scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
     scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)

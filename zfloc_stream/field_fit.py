@@ -32,9 +32,9 @@ import math
 
 import numpy as np
 
-from .. import threads
-from ..config import RefineSettings, ScaleMode
-from ..numba_support import njit
+from . import threads
+from .config import RefineSettings, ScaleMode
+from .numba_support import njit
 
 
 def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
