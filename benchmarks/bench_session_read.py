@@ -132,7 +132,7 @@ def main() -> None:
         if not path.exists():
             write_session(path, args.frames, args.scene)
         size = path.stat().st_size / 1e6
-        n_chunks = len(read_session(path)._summary.chunk_indexes)
+        n_chunks = len(read_session(path).summary.chunk_indexes)
         res = {(w, m): run_child(path, w, m) for w in ("times", "memory") for m in ("old", "new")}
     old, new = res["times", "old"], res["times", "new"]
     n = old["n"]

@@ -19,6 +19,7 @@ from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.datasets.mcap import session_sequence
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.session import read_session
+from zfloc_stream.session import frame_index, stamps
 from zfloc_stream.session import reader as R
 from zfloc_stream.session import schemas as S
 
@@ -121,7 +122,7 @@ def _paths(written):
 
 def test_every_written_session_has_many_chunks(written):
     for path in written.values():
-        assert len(read_session(path)._summary.chunk_indexes) >= 5, path
+        assert len(read_session(path).summary.chunk_indexes) >= 5, path
 
 
 def test_records_slices_equal_a_sequential_read(written):
@@ -185,10 +186,10 @@ def test_rgb_only_session_sequence_flags_the_depth_network(tmp_path):
 def test_a_deep_slice_reads_only_the_chunks_that_hold_it(written, monkeypatch):
     session = read_session(written["camera"])
     index = session.frame_index()
-    n_chunks = len(session._summary.chunk_indexes)
+    n_chunks = len(session.summary.chunk_indexes)
     read = []
-    original = R.Session._chunk_messages
-    monkeypatch.setattr(R.Session, "_chunk_messages", lambda self, f, chunk: read.append(chunk.chunk_start_offset) or original(self, f, chunk))
+    original = frame_index.chunk_messages
+    monkeypatch.setattr(frame_index, "chunk_messages", lambda path, f, chunk: read.append(chunk.chunk_start_offset) or original(path, f, chunk))
     got = list(session.records(len(index) - 2, len(index)))
     assert len(got) == 2 and 1 <= len(read) <= 2 < n_chunks  # the last chunk (and the one before, at most)
     read.clear()
@@ -228,7 +229,7 @@ def test_salvage_never_seeks(written, tmp_path):
 
 def test_header_stamps_read_from_the_bytes_match_the_decoder():
     msg = S.depth_to_msg(np.ones((3, 4), np.float32), 1_234_567_890_123)
-    field = R._timestamp_field(dataclasses.make_dataclass("Sch", ["name", "data"])("foxglove.RawImage", build_file_descriptor_set(RawImage).SerializeToString()))
+    field = stamps.timestamp_field_number(dataclasses.make_dataclass("Sch", ["name", "data"])("foxglove.RawImage", build_file_descriptor_set(RawImage).SerializeToString()))
     assert field == 1
     cases = [
         msg.SerializeToString(),
@@ -240,15 +241,15 @@ def test_header_stamps_read_from_the_bytes_match_the_decoder():
     ]
     for data in cases:
         decoded = RawImage.FromString(data)
-        assert R._scan_stamp(data, 1) == (decoded.HasField("timestamp"), S.from_stamp(decoded.timestamp))
+        assert stamps.scan_stamp(data, 1) == (decoded.HasField("timestamp"), S.from_stamp(decoded.timestamp))
     for bad in (msg.SerializeToString()[:-3], b"\x0a\xff"):
         with pytest.raises((ValueError, IndexError)):
-            R._scan_stamp(bad, 1)
+            stamps.scan_stamp(bad, 1)
 
 
 def test_a_damaged_chunk_is_one_line_error_in_every_path(written, tmp_path):
     data = bytearray(written["camera"].read_bytes())
-    chunk = sorted(read_session(written["camera"])._summary.chunk_indexes, key=lambda c: c.chunk_start_offset)[-2]
+    chunk = sorted(read_session(written["camera"]).summary.chunk_indexes, key=lambda c: c.chunk_start_offset)[-2]
     middle = chunk.chunk_start_offset + chunk.chunk_length // 2
     data[middle : middle + 8] = bytes(255 - b for b in data[middle : middle + 8])
     (tmp_path / "bad.mcap").write_bytes(bytes(data))
