@@ -7,7 +7,7 @@ drawn in pieces (one per room, so the loader's collinear merge has work), pillar
 CIRCLEs in the corridors. The raster is the same plan drawn at 0.05 m (a ROS map YAML +
 PNG). Timed: Floorplan.load of each (primitives, distance field, line neighbours:
 everything a floorplan computes on construction), then the RANSAC per-plan tables
-(ransac.floorplan_matches) on first use and again (cached with the plan).
+(correspondences.floorplan_matches) on first use and again (cached with the plan).
 
     python benchmarks/bench_plan_load.py                 # goal: DXF <= 5 s, raster <= 3 s
     python benchmarks/bench_plan_load.py --keep plan/    # keep the generated files
@@ -26,7 +26,7 @@ import ezdxf
 import numpy as np
 
 from zfloc_stream.config import load_settings
-from zfloc_stream.estimation.ransac import floorplan_matches
+from zfloc_stream.estimation.correspondences import floorplan_matches
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.rng import make_rng

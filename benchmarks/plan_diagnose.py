@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import eval_real  # noqa: E402  (benchmarks/ is not a package)
 
-from zfloc_stream.estimation.ransac import alignment_of, model_rows  # noqa: E402
+from zfloc_stream.estimation.results import alignment_of, model_rows  # noqa: E402
 from zfloc_stream.field_fit import refine_batch  # noqa: E402
 from zfloc_stream.estimation.scoring import floorplan_scorer, score_hypotheses  # noqa: E402
 from zfloc_stream.sim2 import Sim2  # noqa: E402

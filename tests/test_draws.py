@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from zfloc_stream.estimation import ransac
+from zfloc_stream.estimation import correspondences, model_generation
 from zfloc_stream.estimation.draws import admissible_triplets, draw
 
 from types import SimpleNamespace
@@ -42,12 +42,12 @@ def _scene(seed, n_bev=24, clutter=150):
     neighbours = [nb[nb != i] for i, nb in enumerate(neighbours)]
     floorplan = SimpleNamespace(lines=fp_lines, circles=CircleSet.empty(), line_neighbours=neighbours)
     solvers = Settings().estimator.solvers
-    fp = ransac.FloorplanMatches(floorplan, solvers)
+    fp = correspondences.FloorplanMatches(floorplan, solvers)
     bev_lines = LineSet(bev_n, bev_d, np.zeros((n_bev, 2, 2)))
     triplets = gen.integers(0, n_bev, (400, 3))
     pairs = gen.integers(0, n_bev, (300, 2))
-    bev = SimpleNamespace(lines=bev_lines, alpha=ransac._normal_angles(bev_lines), triplets=triplets, pairs=pairs,
-                          triplet_p=ransac._probabilities(gen.random(len(triplets))), pair_p=None)
+    bev = SimpleNamespace(lines=bev_lines, alpha=correspondences.normal_angles(bev_lines), triplets=triplets, pairs=pairs,
+                          triplet_p=correspondences.probabilities(gen.random(len(triplets))), pair_p=None)
     return bev, fp
 
 
@@ -103,7 +103,7 @@ def test_fused_line_models_are_finite_within_the_scale_bounds_and_repeatable(see
     bev, fp = _scene(seed)
     cfg = _estimator(mode, fraction)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
-    for solve in (lambda rng: ransac._models_3l(bev, fp, 700, cfg, rng), lambda rng: ransac._models_2l(bev, fp, 600, cfg, rng, 1.05)):
+    for solve in (lambda rng: model_generation.models_3l(bev, fp, 700, cfg, rng), lambda rng: model_generation.models_2l(bev, fp, 600, cfg, rng, 1.05)):
         got, again = solve(a), solve(b)
         _assert_same_bits(got, again)
         assert len(got) > 20 and np.isfinite(got).all()
@@ -125,10 +125,10 @@ def test_fused_without_candidates():
     cfg = _estimator("prior", 0.03)
     a, b = np.random.default_rng(1), np.random.default_rng(1)
     models, source = drawn_3l(starts, sizes, 0.03, a, bev.triplets[:5], fp.triplets.rows, bev.lines, fp.lines,
-                              ransac._line_angles(bev.lines), fp.line_angles, cfg.solvers)
+                              correspondences.line_angles(bev.lines), fp.line_angles, cfg.solvers)
     assert models.shape == (0, 4) and len(source) == 0
     models, _ = drawn_2l(starts[:, :3], sizes[:, :3], 0.03, a, bev.pairs[:5], fp.pairs.rows, bev.lines, fp.lines,
-                         ransac._line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "prior")
+                         correspondences.line_angles(bev.lines), fp.line_angles, 1.0, cfg.solvers, "prior")
     assert models.shape == (0, 4)
     assert a.random() == b.random()
 
@@ -150,7 +150,7 @@ def test_the_triplet_table_is_every_ordered_non_parallel_triplet_of_neighbours(s
     gen = np.random.default_rng(seed)
     n = int(gen.choice([0, 1, 2, 3, 12, 40]))
     lines = _random_lines(gen, n, np.deg2rad([0.0, 90.0, 45.0, 2.0, 178.0]))
-    alpha = ransac._normal_angles(lines)
+    alpha = correspondences.normal_angles(lines)
     par = np.deg2rad(5.0)
     neighbours = [np.flatnonzero((gen.random(n) < 0.3) & (np.arange(n) != i)) for i in range(n)]
     rows, weights = admissible_triplets(neighbours, alpha, par, lines.lengths)

@@ -52,20 +52,6 @@ def test_a_forbidden_import_breaks_the_contracts(tmp_path, module, line, broken)
     assert "BROKEN" in run.stdout and broken in run.stdout, run.stdout
 
 
-# Private names still imported across modules, all in files issue 25 is rewriting
-# (estimation's numpy/numba pairs); nothing may be added to this list.
-PRIVATE_IMPORTS_LEFT = {
-    ("estimation/ransac.py", "_angle"),
-    ("estimation/scoring_torch.py", "_CACHE_CHUNK"),
-    ("estimation/scoring_torch.py", "_chunks"),
-    ("estimation/solvers_numba.py", "_cumulate"),
-    ("estimation/solvers_numba.py", "_draw_row"),
-    ("estimation/solvers_numba.py", "_SCALE_SLACK"),
-    ("estimation/solvers_numba.py", "_empty"),
-    ("estimation/solvers_numba.py", "_wrap"),
-}
-
-
 def test_no_private_name_is_imported_from_another_module():
     """A leading underscore means "this module's own": another module that needs it gets a
     public name. (numpy's own private modules, read for the environment record, are not ours.)"""
@@ -75,4 +61,4 @@ def test_no_private_name_is_imported_from_another_module():
             if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("zfloc_stream")):
                 found |= {(path.relative_to(PACKAGE).as_posix(), a.name) for a in node.names
                           if a.name.startswith("_") and not a.name.startswith("__")}
-    assert found <= PRIVATE_IMPORTS_LEFT, sorted(found - PRIVATE_IMPORTS_LEFT)
+    assert not found, sorted(found)

@@ -64,8 +64,8 @@ def test_a_round_says_whether_it_searched_globally(monkeypatch):
     from zfloc_stream.estimation import ransac
 
     searches = []
-    seeds = ransac._correlative_seeds
-    monkeypatch.setattr(ransac, "_correlative_seeds", lambda *a: searches.append(1) or seeds(*a))
+    seeds = ransac.correlative_seeds
+    monkeypatch.setattr(ransac, "correlative_seeds", lambda *a: searches.append(1) or seeds(*a))
     scene = build_scene("apartment", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=40)
     loc = Localizer(scene.floorplan, Settings())

@@ -11,7 +11,8 @@ from plan_helpers import RES, building, observe  # synthetic floorplan + BEV hel
 from zfloc_stream.config import Settings
 from zfloc_stream.errors import InputError
 from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
-from zfloc_stream.estimation.ransac import BevSamples, _guided_models, floorplan_matches, solver_pool
+from zfloc_stream.estimation.correspondences import BevSamples, floorplan_matches
+from zfloc_stream.estimation.model_generation import guided_models, solver_pool
 from zfloc_stream.estimation.scoring import implied_poses
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.geometry import CircleSet, LineSet
@@ -167,7 +168,7 @@ def test_guided_samples_stay_near_the_mode_and_correct_it(plain, mode):
     prior = truth.s if mode == "prior" else 1.0
     start = Sim2(truth.s, truth.theta + 0.03, (truth.t[0] + 0.25, truth.t[1] - 0.2))  # drifted mode
     bev = BevSamples(obs, CFG.primitives.lines, cfg.solvers, CFG.floorplan.neighbour_distance)
-    models = _guided_models(bev, floorplan_matches(fp, cfg.solvers), start, 200, cfg, make_rng(3, "t"), prior)
+    models = guided_models(bev, floorplan_matches(fp, cfg.solvers), start, 200, cfg, make_rng(3, "t"), prior)
     assert len(models) > 50  # nearly every sample meets its own walls
     errors = [pose_error(Sim2(m[3], m[2], (m[0], m[1])), truth) for m in models]
     assert max(e[0] for e in errors) < CFG.estimator.ransac.guided_shift + pose_error(start, truth)[0]

@@ -10,7 +10,8 @@ from test_draws import _assert_same_bits, _estimator, _scene
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream.estimation import correlative, ransac, refine, scoring, solvers
+from zfloc_stream import field_fit
+from zfloc_stream.estimation import correlative, model_generation, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 
@@ -77,7 +78,7 @@ def split_everything(monkeypatch):
     """Every kernel call splits, however small (the real minima keep tests' small inputs whole)."""
     monkeypatch.setattr(scoring, "_MIN_LOOKUPS_PER_THREAD", 1)
     monkeypatch.setattr(scoring, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
-    monkeypatch.setattr(refine, "_MIN_MODELS_PER_THREAD", 1)
+    monkeypatch.setattr(field_fit, "_MIN_MODELS_PER_THREAD", 1)
     monkeypatch.setattr(solvers, "_MIN_DRAWS_PER_THREAD", 1)
     split = []
     run = threads.run
@@ -87,7 +88,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring, refine, solvers, correlative):
+    for module in (scoring, field_fit, solvers, correlative):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 
@@ -98,9 +99,9 @@ def test_3l_draws_in_pieces_are_the_whole(split_everything, seed, mode):
     bev, fp = _scene(seed)
     cfg = _estimator(mode, 0.5)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
-    whole = ransac._models_3l(bev, fp, 700, cfg, a)
+    whole = model_generation.models_3l(bev, fp, 700, cfg, a)
     with threads.limit(7):  # pieces start in the middle of a query's draws
-        pieces = ransac._models_3l(bev, fp, 700, cfg, b)
+        pieces = model_generation.models_3l(bev, fp, 700, cfg, b)
     _assert_same_bits(pieces, whole)
     assert split_everything and a.random() == b.random()
 

@@ -34,7 +34,7 @@ from . import threads
 from .config import Settings
 from .errors import ZflocError
 from .estimation import localize
-from .estimation.ransac import LocalizationResult
+from .estimation.results import LocalizationResult
 from .frontend.bev import BevSnapshot
 from .heap import release_free_heap
 from .observation import BevObservation

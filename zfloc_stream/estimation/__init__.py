@@ -1,5 +1,6 @@
 """Hybrid RANSAC estimator: minimal solvers, coarse-to-fine scoring, LM/Huber refinement."""
 
-from .ransac import Hypothesis, LocalizationResult, localize
+from .ransac import localize
+from .results import Hypothesis, LocalizationResult
 
 __all__ = ["Hypothesis", "LocalizationResult", "localize"]

@@ -19,7 +19,7 @@ from ..floorplan import Floorplan
 from ..settings.estimation import EstimatorSettings
 from ..settings.localizer import LocalizerSettings
 from ..sim2 import Sim2
-from .ransac import alignment_of, model_rows
+from .results import alignment_of, model_rows
 from ..field_fit import refine_batch
 from .scoring import floorplan_scorer
 
