@@ -256,7 +256,7 @@ def test_observation_grids_follow_the_thresholds_on_random_grids(memory):
     not free elsewhere; the crop holds every known cell."""
     from scipy import ndimage
 
-    from zfloc_stream.frontend.bev import BevSnapshot, wall_cells
+    from zfloc_stream.frontend.bev_snapshot import BevSnapshot, wall_cells
 
     gen = np.random.default_rng(memory)
     settings = load_settings(overrides=["bev.occupied_threshold=0.4", "bev.free_threshold=-0.3", "bev.wall_min_ratio=0.3",

@@ -35,7 +35,7 @@ from .config import Settings
 from .errors import ZflocError
 from .estimation import localize
 from .estimation.results import LocalizationResult
-from .frontend.bev import BevSnapshot
+from .frontend.bev_snapshot import BevSnapshot
 from .heap import release_free_heap
 from .observation import BevObservation
 from .rng import make_rng

@@ -22,6 +22,9 @@ grow with session length.
 Cameras before gravity is known: frames wait in a bounded buffer (gravity settings) while
 their floor points feed the GravityEstimator; once gravity is frozen they are fused in
 order.
+
+The grid's storage and scrolling are scrolling_grid.py's; a frozen grid and the step from
+it to a BevObservation are bev_snapshot.py's; the scan matcher is scan_match.py.
 """
 
 from __future__ import annotations
@@ -31,79 +34,20 @@ from collections import deque
 import cv2
 import numpy as np
 
-from .. import threads
-from ..circle_fitting import circle_clusters, fit_circles
 from ..config import Settings
 from ..errors import ConfigError, FrameError, InputError
 from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
-from ..geometry import CircleSet, as_points
 from ..observation import BevObservation
-from ..primitives import extract_lines
 from ..rng import make_rng
 from ..sim2 import Sim2
-from . import bev_grids
+from .bev_snapshot import BevSnapshot, wall_cells
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
 from .scan_match import match_scan
+from .scrolling_grid import ScrollingGrid, increment
 from .wallmask import refine_wall_points, upright_rotation
 
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
-
-
-class _ScrollingGrid:
-    """Fixed-size square grid addressed by global integer cell indices (ix0, iy0 = cell (0, 0))."""
-
-    def __init__(self, n: int, resolution: float):
-        self.n = n
-        self.res = resolution
-        self.ix0 = self.iy0 = None
-        self.logodds = np.zeros((n, n), dtype=np.float32)
-        self.wall = np.zeros((n, n), dtype=np.uint16)
-        self.hits = np.zeros((n, n), dtype=np.uint16)
-        self.seen = np.zeros((n, n), dtype=np.int32)  # stamp of the last frame that hit or freed the cell (0: never)
-        self.stamp = 0  # frames fused into this grid
-
-    def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
-        cx, cy = (int(np.floor(v / self.res)) for v in xy)
-        half = self.n // 2
-        if self.ix0 is None:
-            self.ix0, self.iy0 = cx - half, cy - half
-            return
-        dx, dy = cx - half - self.ix0, cy - half - self.iy0
-        if max(abs(dx), abs(dy)) <= slack_cells:
-            return
-        self.logodds = _shifted(self.logodds, dy, dx)
-        self.wall = _shifted(self.wall, dy, dx)
-        self.hits = _shifted(self.hits, dy, dx)
-        self.seen = _shifted(self.seen, dy, dx)
-        self.ix0 += dx
-        self.iy0 += dy
-
-    def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(row, col) of the points inside the grid."""
-        col = np.floor(xy[:, 0] / self.res).astype(np.int64) - self.ix0
-        row = np.floor(xy[:, 1] / self.res).astype(np.int64) - self.iy0
-        inside = (row >= 0) & (row < self.n) & (col >= 0) & (col < self.n)
-        return row[inside], col[inside]
-
-    def unique_flat(self, xy: np.ndarray, min_count: int = 1) -> np.ndarray:
-        """Flat indices of the cells holding at least min_count of the points."""
-        row, col = self.cells(xy)
-        if min_count <= 1:
-            return np.unique(row * self.n + col)
-        flat, counts = np.unique(row * self.n + col, return_counts=True)
-        return flat[counts >= min_count]
-
-
-def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
-    """out[r, c] = a[r + dy, c + dx], zero where that falls outside a."""
-    out = np.zeros_like(a)
-    h, w = a.shape
-    src_r, dst_r = slice(max(dy, 0), min(h, h + dy)), slice(max(-dy, 0), min(h, h - dy))
-    src_c, dst_c = slice(max(dx, 0), min(w, w + dx)), slice(max(-dx, 0), min(w, w - dx))
-    if src_r.start < src_r.stop and src_c.start < src_c.stop:
-        out[dst_r, dst_c] = a[src_r, src_c]
-    return out
 
 
 class RollingBEV:
@@ -124,7 +68,7 @@ class RollingBEV:
         if b.azimuth_bin_deg <= 0 or b.trajectory_length < 1:
             raise ConfigError("bev: azimuth_bin_deg must be > 0 and trajectory_length >= 1")
         half = int(np.ceil((b.window_radius + b.recenter_distance) / b.resolution))
-        self.grid = _ScrollingGrid(2 * half, b.resolution)
+        self.grid = ScrollingGrid(2 * half, b.resolution)
         self._slack = int(np.floor(b.recenter_distance / b.resolution))
         self.gravity = GravityEstimator(f.gravity, make_rng(self.settings.seed, "gravity"))
         self._pending: deque[CameraFrame] = deque()
@@ -174,7 +118,7 @@ class RollingBEV:
     def clear_map(self) -> None:
         """Forget the map (e.g. after the odometry jumped: old and new evidence would
         disagree); gravity and the trajectory stay."""
-        self.grid = _ScrollingGrid(self.grid.n, self.grid.res)
+        self.grid = ScrollingGrid(self.grid.n, self.grid.res)
         self.last_wall_hits = np.zeros((0, 2))
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
@@ -419,83 +363,8 @@ class RollingBEV:
                 np.copyto(seen, np.int32(g.stamp), where=mask.view(bool))
         flat_lo = g.logodds.reshape(-1)
         flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
-        _increment(g.hits, hit_flat)
+        increment(g.hits, hit_flat)
         g.seen.reshape(-1)[hit_flat] = g.stamp
-        _increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
+        increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
 
 
-def wall_cells(wall: np.ndarray, hits: np.ndarray, logodds: np.ndarray, b) -> np.ndarray:
-    """Cells that are BEV walls: wall evidence often enough, mostly seen as wall rather
-    than as clutter, and occupied (the observation and the scan matcher read the same)."""
-    return (wall >= b.wall_min_observations) & (wall >= b.wall_min_ratio * hits) & (logodds > b.occupied_threshold)
-
-
-class BevSnapshot:
-    """The grid of a RollingBEV at one frame and how to turn it into a BevObservation.
-    Pure: the same snapshot and rng give the same observation on any thread or process."""
-
-    def __init__(self, logodds, wall, hits, seen, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings, stamp: int):
-        self.logodds, self.wall, self.hits, self.seen, self.stamp = logodds, wall, hits, seen, stamp
-        self.ix0, self.iy0 = ix0, iy0
-        self.trajectory = trajectory
-        self.settings = settings
-
-    def observation(self, rng: np.random.Generator, circles: bool = True) -> BevObservation:
-        """The cropped grids (known cells plus bev.crop_margin), the wall points, the free
-        mask, the clearance f^v and the primitives; circles=False skips the circles (no
-        floorplan circle to match them: the pillar clustering is a round's largest
-        primitive cost on a plan without pillars). The grid passes are compiled
-        (bev_grids.py: the element-wise tests in two passes, the clearance in a third
-        around OpenCV's exact distance transform), so no full-grid temporaries are built."""
-        b = self.settings.bev
-        n = self.logodds.shape[0]
-        occupied, free_threshold = np.float32(b.occupied_threshold), np.float32(b.free_threshold)
-        use_recent = bool(b.memory_frames)
-        oldest = self.stamp - b.memory_frames
-        grids = (self.logodds, self.wall, self.hits, self.seen)
-        any_wall, r_lo, r_hi, c_lo, c_hi = bev_grids.known_extent(
-            *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)
-        if not any_wall:
-            raise InputError("BEV has no wall points yet")
-        m = int(np.ceil(b.crop_margin / b.resolution))
-        r0, r1 = max(r_lo - m, 0), min(r_hi + m + 1, n)
-        c0, c1 = max(c_lo - m, 0), min(c_hi + m + 1, n)
-        origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
-        free, not_occupied, points = bev_grids.crop_masks(
-            *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
-            use_recent, oldest, origin[0], origin[1], b.resolution)
-        prim = self.settings.primitives
-
-        def free_clearance():
-            distance = cv2.distanceTransform(not_occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-            return bev_grids.clearance(distance, free, b.resolution)
-
-        # Three independent jobs on the round's threads (threads.py), longest first: the
-        # circles' clustering takes no random numbers, so it runs beside the line
-        # extraction, whose draws come first; the circle fits
-        # draw after it. The same observation as one thread gives.
-        clusters, lines, clearance = threads.run(lambda job: job(), [
-            (lambda: circle_clusters(as_points(points), prim.circles)) if circles else (lambda: None),
-            lambda: extract_lines(points, prim.lines, rng),
-            free_clearance,
-        ])
-        found = fit_circles(clusters, prim.circles, rng) if circles else CircleSet.empty()
-        return self._observation(points, origin, free, clearance, lines, found)
-
-    def _observation(self, points, origin, free, clearance, lines, circles) -> BevObservation:
-        return BevObservation(
-            wall_points=points,
-            origin=origin,
-            resolution=self.settings.bev.resolution,
-            free=free,
-            clearance=clearance,
-            lines=lines,
-            circles=circles,
-            trajectory=self.trajectory,
-        )
-
-
-def _increment(counts: np.ndarray, flat: np.ndarray) -> None:
-    """counts.flat[flat] += 1, saturating (uint16)."""
-    view = counts.reshape(-1)
-    view[flat] = np.minimum(view[flat].astype(np.int64) + 1, np.iinfo(counts.dtype).max)
