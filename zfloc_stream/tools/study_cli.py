@@ -1,5 +1,5 @@
 """`zfloc-study`: success rate vs sequence length (F3Loc protocol) over datasets and seeds,
-on all local cores or a dask cluster; resumable (see zfloc_stream/study.py)."""
+on all local cores or a dask cluster; resumable (see zfloc_stream/study/)."""
 
 from __future__ import annotations
 
