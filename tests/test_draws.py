@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from draw_helpers import assert_same_bits, draw_scene, estimator_for
+
 from zfloc_stream.estimation import correspondences, model_generation
 from zfloc_stream.estimation.draws import admissible_triplets, draw
 
@@ -14,56 +16,6 @@ from types import SimpleNamespace
 
 from zfloc_stream.config import Settings
 from zfloc_stream.geometry import CircleSet, LineSet
-
-
-def _scene(seed, n_bev=24, clutter=150):
-    """BEV lines and a floorplan holding them moved by one Sim(2) (normals of either
-    sign) among clutter, with degenerate lines in both (exact axis normals, repeated
-    normals: parallel samples, zero and huge offsets), random floorplan neighbours.
-    Returns (BEV samples as _models_3l / _models_2l read them, FloorplanMatches)."""
-    gen = np.random.default_rng(seed)
-    a = gen.uniform(-np.pi, np.pi, n_bev)
-    a[::2] = np.round(a[::2] / (np.pi / 2)) * (np.pi / 2)  # exact axis normals (cosines 0, +-1)
-    bev_n = np.column_stack([np.cos(a), np.sin(a)])
-    bev_n[-3:] = bev_n[0]  # repeated normals
-    bev_d = gen.normal(0, 6, n_bev)
-    bev_d[-2:] = [0.0, 1.7e308]
-    theta, s, t = gen.uniform(-np.pi, np.pi), gen.uniform(0.9, 1.1), gen.normal(0, 5, 2)
-    rot = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-    moved = bev_n @ rot.T
-    sign = np.where(gen.random(n_bev) < 0.5, -1.0, 1.0)
-    c = gen.uniform(-np.pi, np.pi, clutter)
-    fp_n = np.vstack([moved * sign[:, None], np.column_stack([np.cos(c), np.sin(c)])])
-    with np.errstate(over="ignore"):
-        fp_d = np.concatenate([(s * bev_d - moved @ t) * sign, gen.normal(0, 8, clutter)])
-    n_fp = len(fp_d)
-    fp_lines = LineSet(fp_n, fp_d, np.zeros((n_fp, 2, 2)))
-    neighbours = [np.flatnonzero(gen.random(n_fp) < 0.06) for _ in range(n_fp)]
-    neighbours = [nb[nb != i] for i, nb in enumerate(neighbours)]
-    floorplan = SimpleNamespace(lines=fp_lines, circles=CircleSet.empty(), line_neighbours=neighbours)
-    solvers = Settings().estimator.solvers
-    fp = correspondences.FloorplanMatches(floorplan, solvers)
-    bev_lines = LineSet(bev_n, bev_d, np.zeros((n_bev, 2, 2)))
-    triplets = gen.integers(0, n_bev, (400, 3))
-    pairs = gen.integers(0, n_bev, (300, 2))
-    bev = SimpleNamespace(lines=bev_lines, alpha=correspondences.normal_angles(bev_lines), triplets=triplets, pairs=pairs,
-                          triplet_p=correspondences.probabilities(gen.random(len(triplets))), pair_p=None)
-    return bev, fp
-
-
-def _estimator(mode, fraction):
-    cfg = Settings().estimator
-    solvers = cfg.solvers
-    if mode == "prior":  # the bounds localize sets at a prior of 1
-        solvers = solvers.model_copy(update={"min_scale": 1 / 1.15, "max_scale": 1.15})
-    return cfg.model_copy(update={"scale_mode": mode, "solvers": solvers,
-                                  "ransac": cfg.ransac.model_copy(update={"match_fraction": fraction})})
-
-
-def _assert_same_bits(got, ref):
-    assert got.shape == ref.shape and got.dtype == ref.dtype == np.float64
-    assert np.array_equal(got.view(np.int64), ref.view(np.int64))  # -0.0 for +0.0 fails too
-
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -100,12 +52,12 @@ def test_draw_with_no_candidates():
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("mode, fraction", [("free", 0.03), ("prior", 1.0), ("fixed", 0.5)])
 def test_fused_line_models_are_finite_within_the_scale_bounds_and_repeatable(seed, mode, fraction):
-    bev, fp = _scene(seed)
-    cfg = _estimator(mode, fraction)
+    bev, fp = draw_scene(seed)
+    cfg = estimator_for(mode, fraction)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
     for solve in (lambda rng: model_generation.models_3l(bev, fp, 700, cfg, rng), lambda rng: model_generation.models_2l(bev, fp, 600, cfg, rng, 1.05)):
         got, again = solve(a), solve(b)
-        _assert_same_bits(got, again)
+        assert_same_bits(got, again)
         assert len(got) > 20 and np.isfinite(got).all()
         assert np.all(np.abs(got[:, 2]) <= np.pi)
         if mode == "fixed":
@@ -120,9 +72,9 @@ def test_fused_without_candidates():
     prior) the zero-size noise draw; the generator is left as it was."""
     from zfloc_stream.estimation.solvers import drawn_2l, drawn_3l
 
-    bev, fp = _scene(0)
+    bev, fp = draw_scene(0)
     starts, sizes = np.zeros((5, 9), np.int64), np.zeros((5, 9), np.int64)
-    cfg = _estimator("prior", 0.03)
+    cfg = estimator_for("prior", 0.03)
     a, b = np.random.default_rng(1), np.random.default_rng(1)
     models, source = drawn_3l(starts, sizes, 0.03, a, bev.triplets[:5], fp.triplets.rows, bev.lines, fp.lines,
                               correspondences.line_angles(bev.lines), fp.line_angles, cfg.solvers)

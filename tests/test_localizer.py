@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from localizer_helpers import Kidnapped
 
 from zfloc_stream.config import Settings
 from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
@@ -107,21 +108,6 @@ def test_symmetric_building_is_ambiguous_until_the_distinguishing_part_is_seen()
     assert np.linalg.norm(est.pose[:2] - seq.poses[-1][:2]) < 1.0
 
 
-class _Kidnapped:
-    """Frames whose odometry jumps (a VIO reset) at frame k0 while the camera moves on."""
-
-    def __init__(self, seq, k0, yaw=1.0, shift=(4.0, -3.0)):
-        self.seq, self.k0 = seq, k0
-        c, s = np.cos(yaw), np.sin(yaw)
-        self.jump = np.eye(4)
-        self.jump[:2, :2] = [[c, -s], [s, c]]
-        self.jump[:2, 3] = shift
-
-    def __iter__(self):
-        for k, frame in enumerate(self.seq):
-            yield frame if k < self.k0 else replace(frame, T_odom_cam=self.jump @ frame.T_odom_cam)
-
-
 @pytest.mark.parametrize("pipeline, lag", [("inline", 0), ("online", 5)])
 def test_kidnapping_is_detected_and_recovered_within_30_frames(pipeline, lag):
     """Within 30 frames of rounds; online (the default) lands each round once a pose
@@ -129,7 +115,7 @@ def test_kidnapping_is_detected_and_recovered_within_30_frames(pipeline, lag):
     scene = build_scene("apartment", seed=2)
     seq = simulate(scene, SimSettings(), seed=2, n_frames=90)
     k0 = 45
-    _, est = _run(scene, _Kidnapped(seq, k0), Settings(localizer={"pipeline": pipeline}))
+    _, est = _run(scene, Kidnapped(seq, k0), Settings(localizer={"pipeline": pipeline}))
     assert est[k0 - 1].status == "tracking"
     after = [e.status for e in est[k0:]]
     assert "lost" in after[: 30 + lag], after

@@ -8,7 +8,7 @@ import threading
 
 import numpy as np
 import pytest
-from test_localizer import _Kidnapped
+from localizer_helpers import Kidnapped, estimate_bits, run_localizer, settings_with
 
 from zfloc_stream import round_scheduler as round_scheduler_module
 from zfloc_stream.config import load_settings
@@ -20,31 +20,12 @@ from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulat
 from zfloc_stream.tools import cli, replay_cli
 
 
-def _settings(*overrides):
-    return load_settings(overrides=list(overrides))
-
-
-def _run(floorplan, frames, settings):
-    with Localizer(floorplan, settings) as loc:
-        return [loc.push(f) for f in frames]
-
-
-def _bits(est):
-    """Everything an estimate reports except its timings, as bytes / plain values."""
-    def b(a):
-        return None if a is None else np.asarray(a, dtype=float).tobytes()
-
-    alts = tuple((b(a.pose), b(a.weight), b(a.score), b(a.alignment.params())) for a in est.alternatives)
-    align = None if est.alignment is None else b(est.alignment.params())
-    return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped, est.round_skipped)  # bytes: NaN == NaN
-
-
 @pytest.fixture(scope="module")
 def kidnapped_camera():
     """A camera run whose odometry jumps: the monitor asks for a global search mid-stream."""
     scene = build_scene("apartment", seed=2)
     seq = simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=60)
-    return scene.floorplan, list(_Kidnapped(seq, 30))
+    return scene.floorplan, list(Kidnapped(seq, 30))
 
 
 @pytest.fixture(scope="module")
@@ -56,26 +37,26 @@ def laser():
 @pytest.mark.parametrize("delay", ["0", "3", "12"])  # 0 = every_k_frames; 12: rounds overlap
 def test_pipelined_equals_delayed_inline_bit_for_bit(kidnapped_camera, delay):
     floorplan, frames = kidnapped_camera
-    delayed = _run(floorplan, frames, _settings("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
-    with Localizer(floorplan, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
+    delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
+    with Localizer(floorplan, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
         piped = [loc.push(f) for f in frames]
         assert loc.rounds.global_search_requests >= 1  # the monitor's global-search request crossed a pending round
-    assert [_bits(e) for e in piped] == [_bits(e) for e in delayed]
+    assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
     assert delayed[-1].pose is not None
 
 
 def test_a_worker_process_gives_the_same_bits(laser):
     floorplan, frames = laser
-    delayed = _run(floorplan, frames, _settings("localizer.pipeline=delayed"))
-    piped = _run(floorplan, frames, _settings("localizer.pipeline=pipelined", "localizer.worker=process"))
-    assert [_bits(e) for e in piped] == [_bits(e) for e in delayed]
+    delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed"))
+    piped = run_localizer(floorplan, frames, settings_with("localizer.pipeline=pipelined", "localizer.worker=process"))
+    assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
 
 
 def test_a_round_lands_exactly_at_its_join_frame(laser):
     floorplan, frames = laser
     k, delay = 5, 3
-    inline = _run(floorplan, frames, _settings("localizer.pipeline=inline"))
-    piped = _run(floorplan, frames, _settings("localizer.pipeline=pipelined", f"localizer.join_delay={delay}"))
+    inline = run_localizer(floorplan, frames, settings_with("localizer.pipeline=inline"))
+    piped = run_localizer(floorplan, frames, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}"))
     starts = [i for i in range(len(frames)) if (i + 1) % k == 0]
     assert [i for i, e in enumerate(inline) if "model_estimation" in e.timings] == starts  # inline: in the starting push
     assert [i for i, e in enumerate(piped) if "model_estimation" in e.timings] == [i + delay for i in starts if i + delay < len(frames)]
@@ -88,20 +69,20 @@ def test_a_round_lands_exactly_at_its_join_frame(laser):
 
 def test_inline_ignores_join_delay(laser):
     floorplan, frames = laser
-    a = _run(floorplan, frames[:12], _settings("localizer.pipeline=inline"))
-    b = _run(floorplan, frames[:12], _settings("localizer.pipeline=inline", "localizer.join_delay=3"))
-    assert [_bits(e) for e in a] == [_bits(e) for e in b]
+    a = run_localizer(floorplan, frames[:12], settings_with("localizer.pipeline=inline"))
+    b = run_localizer(floorplan, frames[:12], settings_with("localizer.pipeline=inline", "localizer.join_delay=3"))
+    assert [estimate_bits(e) for e in a] == [estimate_bits(e) for e in b]
 
 
 def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkeypatch):
     floorplan, frames = laser
-    settings = _settings("localizer.pipeline=pipelined", "localizer.join_delay=5")
+    settings = settings_with("localizer.pipeline=pipelined", "localizer.join_delay=5")
 
     def refuse(*args, **kwargs):
         raise InputError("estimator refused this BEV")
 
     monkeypatch.setattr(round_scheduler_module, "localize", refuse)
-    est = _run(floorplan, frames[:15], settings)
+    est = run_localizer(floorplan, frames[:15], settings)
     assert all(e.pose is None and e.status == "initializing" for e in est)
     # the reason lands on the join frame (round started at 4 -> 9, at 9 -> 14), nowhere else
     assert [e.frame for e in est if e.round_skipped] == [9, 14]
@@ -121,7 +102,7 @@ def test_a_refused_round_is_skipped_and_a_bug_surfaces_at_the_join(laser, monkey
 def test_close_stops_the_worker_and_drops_rounds_no_frame_reached(laser):
     floorplan, frames = laser
     workers = _round_workers()  # other tests' localizers may still hold theirs
-    loc = Localizer(floorplan, _settings("localizer.pipeline=pipelined", "localizer.join_delay=5"))
+    loc = Localizer(floorplan, settings_with("localizer.pipeline=pipelined", "localizer.join_delay=5"))
     for f in frames[:7]:  # round started at frame 4 would land at frame 9
         loc.push(f)
     assert loc.rounds.in_flight == 1 and _round_workers() == workers + 1
@@ -137,27 +118,27 @@ def _round_workers() -> int:
 def test_bad_pipeline_settings_are_one_config_error_line():
     for override, word in (("localizer.pipeline=sideways", "localizer.pipeline"), ("localizer.join_delay=-1", "localizer.join_delay"), ("localizer.worker=gpu", "localizer.worker")):
         with pytest.raises(ConfigError) as err:
-            _settings(override)
+            settings_with(override)
         assert word in str(err.value) and "\n" not in str(err.value)
 
 
 def test_replay_check_of_a_pipelined_session(laser, tmp_path):
     floorplan, frames = laser
     path = tmp_path / "piped.mcap"
-    settings = _settings("localizer.pipeline=pipelined", "localizer.join_delay=2")
+    settings = settings_with("localizer.pipeline=pipelined", "localizer.join_delay=2")
     logged = record_session(path, floorplan, frames, settings)
     session = read_session(path)
     again = replay_settings(session)
     assert again.localizer.pipeline == "pipelined" and again.localizer.join_delay == 2  # replay uses the logged mode
     result = replay_session(session, again, session.floorplan, check=True)
     assert result.divergence is None and result.checked == len(frames)
-    assert [_bits(e) for e in result.estimates] == [_bits(e) for e in logged]
+    assert [estimate_bits(e) for e in result.estimates] == [estimate_bits(e) for e in logged]
 
 
 def test_run_and_replay_cli_agree_on_a_pipelined_session(laser, tmp_path, capsys):
     floorplan, frames = laser
     source = tmp_path / "source.mcap"
-    record_session(source, floorplan, frames[:20], _settings())
+    record_session(source, floorplan, frames[:20], settings_with())
     plan = floorplan.write_ros(tmp_path / "plan")
     out = tmp_path / "out"
     args = ["run", "--floorplan", str(plan), "--input", str(source), "--out", str(out), "--set", "localizer.pipeline=pipelined", "--no-progress"]
@@ -171,24 +152,24 @@ def test_online_gives_the_first_fix_inline_then_joins_later(laser):
     lands round_delay frames after its start, on the worker."""
     floorplan, frames = laser
     k = 5
-    inline = _run(floorplan, frames, _settings("localizer.pipeline=inline"))
-    online = _run(floorplan, frames, _settings())
-    assert _settings().localizer.pipeline == "online"
+    inline = run_localizer(floorplan, frames, settings_with("localizer.pipeline=inline"))
+    online = run_localizer(floorplan, frames, settings_with())
+    assert settings_with().localizer.pipeline == "online"
     first = next(i for i, e in enumerate(inline) if e.pose is not None)
     assert next(i for i, e in enumerate(online) if e.pose is not None) == first
-    assert [_bits(e) for e in online[: first + 1]] == [_bits(e) for e in inline[: first + 1]]
+    assert [estimate_bits(e) for e in online[: first + 1]] == [estimate_bits(e) for e in inline[: first + 1]]
     later = [i for i in range(first + 1, len(frames)) if (i + 1) % k == 0]
     assert later and all("round_start" in online[i].timings for i in later)
-    delay = _settings().localizer.round_delay
+    delay = settings_with().localizer.round_delay
     assert all("round_wait" in online[i + delay].timings for i in later if i + delay < len(frames))
     assert all(e.pose is not None for e in online[first:])
 
 
 def test_online_replays_bit_for_bit_on_a_thread_or_a_process(laser):
     floorplan, frames = laser
-    a = _run(floorplan, frames, _settings("localizer.pipeline=online"))
-    b = _run(floorplan, frames, _settings("localizer.pipeline=online", "localizer.worker=process"))
-    assert [_bits(e) for e in a] == [_bits(e) for e in b]
+    a = run_localizer(floorplan, frames, settings_with("localizer.pipeline=online"))
+    b = run_localizer(floorplan, frames, settings_with("localizer.pipeline=online", "localizer.worker=process"))
+    assert [estimate_bits(e) for e in a] == [estimate_bits(e) for e in b]
 
 
 def test_studies_run_rounds_inline_unless_told_otherwise():

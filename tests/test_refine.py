@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_scoring import building, observe  # synthetic floorplan + BEV helpers
+from plan_helpers import building, observe  # synthetic floorplan + BEV helpers
 
 from zfloc_stream.config import RefineSettings
 from zfloc_stream.field_fit import refine_batch

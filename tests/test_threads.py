@@ -5,8 +5,8 @@ import threading
 
 import numpy as np
 import pytest
-from test_localizer_pipeline import _bits, _run, _settings
-from test_draws import _assert_same_bits, _estimator, _scene
+from draw_helpers import assert_same_bits, draw_scene, estimator_for
+from localizer_helpers import estimate_bits, run_localizer, settings_with
 
 from zfloc_stream import threads
 from zfloc_stream.errors import ConfigError
@@ -70,7 +70,7 @@ def test_ranges_and_resolve():
 
 def test_bad_thread_count_is_a_config_error():
     with pytest.raises(ConfigError):
-        _settings("estimator.threads=-1")
+        settings_with("estimator.threads=-1")
 
 
 @pytest.fixture
@@ -96,13 +96,13 @@ def split_everything(monkeypatch):
 @pytest.mark.parametrize("seed", range(2))
 @pytest.mark.parametrize("mode", ["free", "prior"])
 def test_3l_draws_in_pieces_are_the_whole(split_everything, seed, mode):
-    bev, fp = _scene(seed)
-    cfg = _estimator(mode, 0.5)
+    bev, fp = draw_scene(seed)
+    cfg = estimator_for(mode, 0.5)
     a, b = np.random.default_rng(seed), np.random.default_rng(seed)
     whole = model_generation.models_3l(bev, fp, 700, cfg, a)
     with threads.limit(7):  # pieces start in the middle of a query's draws
         pieces = model_generation.models_3l(bev, fp, 700, cfg, b)
-    _assert_same_bits(pieces, whole)
+    assert_same_bits(pieces, whole)
     assert split_everything and a.random() == b.random()
 
 
@@ -116,10 +116,10 @@ def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, c
     else:
         scene = build_scene("apartment", seed=2)
         frames = list(simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=30))
-    one = _run(scene.floorplan, frames, _settings("estimator.threads=1"))
+    one = run_localizer(scene.floorplan, frames, settings_with("estimator.threads=1"))
     assert not split_everything
-    three = _run(scene.floorplan, frames, _settings("estimator.threads=3"))
-    assert [_bits(e) for e in three] == [_bits(e) for e in one]
+    three = run_localizer(scene.floorplan, frames, settings_with("estimator.threads=3"))
+    assert [estimate_bits(e) for e in three] == [estimate_bits(e) for e in one]
     assert one[-1].pose is not None
     wanted = {"piece", "search_pair", "<lambda>"}
     assert wanted <= set(split_everything)

@@ -1,0 +1,43 @@
+"""Running a Localizer in tests (test_localizer*.py, test_threads.py): frames whose odometry
+jumps, a run with settings overrides, and an estimate as bytes for bit-for-bit checks."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from zfloc_stream.config import load_settings
+from zfloc_stream.localizer import Localizer
+
+
+class Kidnapped:
+    """Frames whose odometry jumps (a VIO reset) at frame k0 while the camera moves on."""
+
+    def __init__(self, seq, k0, yaw=1.0, shift=(4.0, -3.0)):
+        self.seq, self.k0 = seq, k0
+        c, s = np.cos(yaw), np.sin(yaw)
+        self.jump = np.eye(4)
+        self.jump[:2, :2] = [[c, -s], [s, c]]
+        self.jump[:2, 3] = shift
+
+    def __iter__(self):
+        for k, frame in enumerate(self.seq):
+            yield frame if k < self.k0 else replace(frame, T_odom_cam=self.jump @ frame.T_odom_cam)
+
+
+def settings_with(*overrides):
+    return load_settings(overrides=list(overrides))
+
+
+def run_localizer(floorplan, frames, settings):
+    with Localizer(floorplan, settings) as loc:
+        return [loc.push(f) for f in frames]
+
+
+def estimate_bits(est):
+    """Everything an estimate reports except its timings, as bytes / plain values."""
+    def b(a):
+        return None if a is None else np.asarray(a, dtype=float).tobytes()
+
+    alts = tuple((b(a.pose), b(a.weight), b(a.score), b(a.alignment.params())) for a in est.alternatives)
+    align = None if est.alignment is None else b(est.alignment.params())
+    return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped, est.round_skipped)  # bytes: NaN == NaN
