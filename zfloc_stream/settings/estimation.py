@@ -3,6 +3,7 @@ refinement, RANSAC, the correlative seeds (estimation/, line_growing.py, circle_
 
 from __future__ import annotations
 
+import warnings
 from typing import Literal
 
 from pydantic import Field, model_validator
