@@ -17,7 +17,6 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from .draws import admissible_triplets
-from .scoring import distinct
 from .solvers import normal_angle
 
 
