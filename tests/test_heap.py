@@ -6,6 +6,7 @@ import os
 import pytest
 
 from zfloc_stream import localizer as localizer_module
+from zfloc_stream import round_scheduler
 from zfloc_stream.config import load_settings
 from zfloc_stream.heap import _malloc_trim, release_free_heap
 from zfloc_stream.sim import build_scene
@@ -43,7 +44,7 @@ def test_free_heap_pages_are_returned():
 @pytest.mark.parametrize("release", [True, False])
 def test_every_round_releases_the_heap_unless_told_not_to(monkeypatch, release):
     calls = []
-    monkeypatch.setattr(localizer_module, "release_free_heap", lambda: calls.append(1) or True)
+    monkeypatch.setattr(round_scheduler, "release_free_heap", lambda: calls.append(1) or True)
     scene = build_scene("rooms", seed=0)
     settings = load_settings(overrides=[f"localizer.release_memory={str(release).lower()}", "localizer.pipeline=inline"])
     loc = localizer_module.Localizer(scene.floorplan, settings)
