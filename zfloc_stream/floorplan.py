@@ -13,13 +13,12 @@ Primitives come from wall *faces* (wall cells next to a non-wall cell), since a 
 wall surfaces, not the inside of thick walls: each face of a thick wall gives its own line,
 and faces closer than dedup_offset (thin walls) merge into one. Circles are looked for only
 in isolated wall blobs no wider than a pillar.
+
+Reading a raster plan's files and their checks: raster_files.py.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
-import threading
 from functools import cached_property
 from pathlib import Path
 
@@ -28,156 +27,25 @@ import numpy as np
 import yaml
 
 from .config import Settings
-from .documents import TooDeep, load_yaml, real_number
 from .errors import FloorplanError, InputError
 from .geometry import CircleSet, LineSet, as_points, grid_subsample
+from .raster_files import (
+    GIBSON_RESOLUTION,
+    IMAGE_SUFFIXES,
+    MAP_YAML_SUFFIXES,
+    MAX_COORDINATE,
+    ROS_KEYS,
+    built_naming_file,
+    check_fraction,
+    check_origin,
+    check_plan_budget,
+    check_resolution,
+    image_size,
+    read_gray,
+    read_map_yaml,
+    short_repr,
+)
 from .rng import make_rng
-
-ROS_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
-IMAGE_SUFFIXES = (".png", ".pgm", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-GIBSON_RESOLUTION = 0.01  # m/px of Gibson(t)/F3Loc map.png
-# Largest |coordinate| in metres a plan may place anything at: farther than any projected
-# CRS on Earth reaches (UTM northings stay below 1e7 m), and float64 still resolves 1e-8 m
-# there; beyond it a coordinate is a mistake (1e308 would make every cell the same point).
-MAX_COORDINATE = 1e8
-_PIL_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def _pillow():
-    """Pillow's Image with its decompression-bomb guard off (our own budget applies,
-    floorplan.max_cells), for one caller at a time (the guard is a module global)."""
-    from PIL import Image
-
-    with _PIL_LOCK:
-        guard, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
-        try:
-            yield Image
-        finally:
-            Image.MAX_IMAGE_PIXELS = guard
-
-
-def _image_size(path: Path) -> tuple[int, int] | None:
-    """(width, height) from the image file's header without decoding it (None when
-    Pillow does not know the format; cv2 then reads it whole)."""
-    with _pillow() as Image:
-        try:
-            with Image.open(path) as im:
-                return im.size
-        except Exception:  # noqa: BLE001 - unknown format or damaged header: cv2 decides
-            return None
-
-
-def _decodes(path: Path) -> str | None:
-    """Why Pillow cannot decode the image (None when it can, or does not know the format):
-    checked before cv2 reads it, since libpng prints its own errors on stderr."""
-    from PIL import UnidentifiedImageError
-
-    with _pillow() as Image:
-        try:
-            with Image.open(path) as im:
-                im.load()
-        except UnidentifiedImageError:
-            return None
-        except Exception as err:  # noqa: BLE001 - any decoder fault on damaged bytes
-            return f"{type(err).__name__}: {err}"
-    return None
-
-
-def _read_gray(path: Path, settings: Settings | None = None) -> np.ndarray:
-    if not path.is_file():
-        raise FloorplanError(f"floorplan image not found: {path}")
-    size = _image_size(path)
-    if size is not None:  # the budget before the pixels are decoded
-        _check_cells(size[1], size[0], settings if settings is not None else Settings(), str(path))
-        broken = _decodes(path)
-        if broken is not None:
-            raise FloorplanError(f"cannot read floorplan image {path}: damaged ({broken})")
-    with _quiet_stderr():  # libpng prints its own messages for damaged files; ours follows
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None or img.size == 0:
-        raise FloorplanError(f"cannot read floorplan image (not a readable image file): {path}")
-    return img
-
-
-@contextlib.contextmanager
-def _quiet_stderr():
-    """File descriptor 2 to /dev/null for the block (C libraries' own messages)."""
-    try:
-        saved = os.dup(2)
-    except OSError:
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-
-
-def _check_cells(h: int, w: int, settings: Settings, source: str) -> None:
-    limit = settings.floorplan.max_cells
-    if h * w > limit:
-        raise FloorplanError(
-            f"{source}: the plan is {w}x{h} cells ({h * w:,}), more than floorplan.max_cells = {limit:,} "
-            f"(raise it with --set floorplan.max_cells=N where the machine has the memory)"
-        )
-
-
-def check_plan_budget(shape: tuple[int, int], resolution: float, settings: Settings, source: str) -> None:
-    """Refuse a plan whose raster or whose estimator search grid (correlative.cell over the
-    plan's extent) exceeds floorplan.max_cells, before either is allocated."""
-    h, w = shape
-    _check_cells(h, w, settings, source)
-    cell = settings.estimator.correlative.cell
-    with np.errstate(over="ignore"):
-        grid = (w * resolution / cell) * (h * resolution / cell)
-    if not np.isfinite(grid) or grid > settings.floorplan.max_cells:
-        raise FloorplanError(
-            f"{source}: the plan spans {w * resolution:.4g} x {h * resolution:.4g} m ({w}x{h} cells at {resolution:.4g} m): "
-            f"the estimator's search grid over it ({cell} m cells) would hold {grid:.3g} cells, more than "
-            f"floorplan.max_cells = {settings.floorplan.max_cells:,}; is the resolution right? "
-            f"(--set floorplan.max_cells=N raises the limit)"
-        )
-
-
-def _check_resolution(value, source: str) -> float:
-    res = real_number(value)
-    if res is None:
-        raise FloorplanError(f"{source}: resolution must be a number of metres per pixel, got {value!r}")
-    if not (np.isfinite(res) and res > 0):
-        raise FloorplanError(f"{source}: resolution must be positive and finite, got {value!r}")
-    return res
-
-
-def _check_origin(value, source: str) -> np.ndarray:
-    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
-    numbers = None if items is None else [real_number(v) for v in np.asarray(items, dtype=object).reshape(-1)]
-    if numbers is None or any(v is None for v in numbers):
-        raise FloorplanError(f"{source}: origin must be [x, y] or [x, y, yaw] of numbers, got {_short(value)}")
-    o = np.array(numbers, dtype=float)
-    if o.size not in (2, 3) or not np.isfinite(o).all():
-        raise FloorplanError(f"{source}: origin must be [x, y] or [x, y, yaw] of finite numbers, got {_short(value)}")
-    if np.abs(o[:2]).max() > MAX_COORDINATE:
-        raise FloorplanError(f"{source}: origin {_short(value)} lies more than {MAX_COORDINATE:.0e} m from 0: not a place on Earth")
-    if o.size == 3 and abs(o[2]) > 1e-9:
-        raise FloorplanError(f"{source}: rotated map origins (yaw != 0) are not supported")
-    return o[:2].copy()
-
-
-def _short(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _check_fraction(meta: dict, key: str, source: str) -> float:
-    v = real_number(meta[key])
-    if v is None or not (0.0 <= v <= 1.0):
-        raise FloorplanError(f"{source}: {key} must be a number in [0, 1], got {_short(meta[key])}")
-    return v
-
 
 def _segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
     """Minimum distance between segments a (a0 -> a1) and b, element-wise over arrays of
@@ -240,30 +108,6 @@ def blob_spans(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, span
 
 
-def _named(path: Path, cls, *args):
-    """cls(*args), its FloorplanError naming the file the plan came from."""
-    try:
-        return cls(*args)
-    except FloorplanError as err:
-        raise FloorplanError(f"{path}: {err}") from None
-
-
-MAP_YAML_SUFFIXES = (".yaml", ".yml")
-
-
-def read_map_yaml(path: Path):
-    """The parsed map YAML (a ROS map, or a vector plan's `vector:` YAML), or a one-line
-    FloorplanError."""
-    if not path.is_file():
-        raise FloorplanError(f"floorplan YAML not found: {path}")
-    try:
-        return load_yaml(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-        raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
-    except TooDeep as err:
-        raise FloorplanError(f"{path}: {err} (a map YAML is a flat mapping)") from None
-
-
 class Floorplan:
     """Walls of one building in metres; build with from_occupancy / load / from_gibson_map."""
 
@@ -271,8 +115,8 @@ class Floorplan:
         occ = np.asarray(occupied)
         if occ.ndim != 2 or occ.shape[0] < 2 or occ.shape[1] < 2:
             raise FloorplanError(f"floorplan {name!r}: occupancy must be a 2D grid of at least 2x2 cells, got shape {occ.shape}")
-        self.resolution = _check_resolution(resolution, f"floorplan {name!r}")
-        self.origin = _check_origin(origin, f"floorplan {name!r}")
+        self.resolution = check_resolution(resolution, f"floorplan {name!r}")
+        self.origin = check_origin(origin, f"floorplan {name!r}")
         self.settings = settings if settings is not None else Settings()
         self.name = name
         check_plan_budget(occ.shape, self.resolution, self.settings, f"floorplan {name!r}")
@@ -337,16 +181,16 @@ class Floorplan:
             if missing:
                 raise FloorplanError(f"{path}: an image floorplan needs {' and '.join(missing)} (e.g. --resolution 0.05 --origin X Y: metres per pixel, then the metric position of the lower-left corner)")
             cfg = settings if settings is not None else Settings()
-            res = _check_resolution(resolution, str(path))
-            _check_origin(origin, str(path))
-            size = _image_size(path) if path.is_file() else None
+            res = check_resolution(resolution, str(path))
+            check_origin(origin, str(path))
+            size = image_size(path) if path.is_file() else None
             if size is not None:  # the extent budget too, before the pixels are decoded
                 check_plan_budget(size[::-1], res, cfg, str(path))
-            img = _read_gray(path, cfg)
+            img = read_gray(path, cfg)
             occ = (255.0 - img) / 255.0 > cfg.floorplan.image_wall_threshold
             if flip_y:
                 occ = occ[::-1]
-            return _named(path, cls, occ, resolution, origin, cfg, path.stem)
+            return built_naming_file(path, cls, occ, resolution, origin, cfg, path.stem)
         raise FloorplanError(f"{path}: unknown floorplan format '{path.suffix}' (expected a ROS map .yaml/.yml, an image ({', '.join(IMAGE_SUFFIXES)}) with --resolution and --origin, or a DXF/SVG/GeoJSON drawing (.dxf, .svg, .geojson/.json))")
 
     @classmethod
@@ -362,27 +206,27 @@ class Floorplan:
         missing = [k for k in ROS_KEYS if k not in meta]
         if missing:
             raise FloorplanError(f"{path}: missing key(s) {', '.join(missing)}")
-        resolution = _check_resolution(meta["resolution"], str(path))
-        origin = _check_origin(meta["origin"], str(path))
+        resolution = check_resolution(meta["resolution"], str(path))
+        origin = check_origin(meta["origin"], str(path))
         if meta["negate"] not in (0, 1) or isinstance(meta["negate"], float):
-            raise FloorplanError(f"{path}: negate must be 0 or 1, got {_short(meta['negate'])}")
+            raise FloorplanError(f"{path}: negate must be 0 or 1, got {short_repr(meta['negate'])}")
         negate = bool(meta["negate"])
-        occ_thresh, free_thresh = _check_fraction(meta, "occupied_thresh", str(path)), _check_fraction(meta, "free_thresh", str(path))
+        occ_thresh, free_thresh = check_fraction(meta, "occupied_thresh", str(path)), check_fraction(meta, "free_thresh", str(path))
         if not (free_thresh <= occ_thresh):
             raise FloorplanError(f"{path}: need 0 <= free_thresh <= occupied_thresh <= 1, got {free_thresh}, {occ_thresh}")
         if not isinstance(meta["image"], str) or not meta["image"].strip():
-            raise FloorplanError(f"{path}: image must be the image's file name, got {_short(meta['image'])}")
+            raise FloorplanError(f"{path}: image must be the image's file name, got {short_repr(meta['image'])}")
         image = Path(meta["image"])
         if not image.is_absolute():
             image = path.parent / image
         cfg = settings if settings is not None else Settings()
         if not image.is_file():
             raise FloorplanError(f"{path}: its image {meta['image']!r} is not a file ({image})")
-        size = _image_size(image)
+        size = image_size(image)
         if size is not None:  # the extent budget before the pixels are decoded
             check_plan_budget(size[::-1], resolution, cfg, str(path))
         try:
-            img = _read_gray(image, cfg)  # uint8
+            img = read_gray(image, cfg)  # uint8
         except FloorplanError as err:
             raise FloorplanError(f"{path}: {err}") from None
         # occupancy probability of each grey level (map_server's rule), looked up per pixel:
@@ -390,7 +234,7 @@ class Floorplan:
         level = np.arange(256, dtype=float)
         occupied_level = (level / 255.0 if negate else (255.0 - level) / 255.0) > occ_thresh
         occ = occupied_level[img][::-1]  # image row 0 = largest y
-        return _named(path, cls, occ, resolution, origin, settings, path.stem)
+        return built_naming_file(path, cls, occ, resolution, origin, settings, path.stem)
 
     @classmethod
     def from_gibson_map(cls, path, settings: Settings | None = None) -> Floorplan:
@@ -398,7 +242,7 @@ class Floorplan:
         x/0.01 + W/2 and row y/0.01 + H/2 (rows grow with y: no flip)."""
         path = Path(path)
         cfg = settings if settings is not None else Settings()
-        img = _read_gray(path, cfg)
+        img = read_gray(path, cfg)
         occ = (255.0 - img) / 255.0 > cfg.floorplan.image_wall_threshold
         h, w = occ.shape
         origin = (-w / 2 * GIBSON_RESOLUTION, -h / 2 * GIBSON_RESOLUTION)

@@ -11,7 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .config import Settings
-from .floorplan import MAP_YAML_SUFFIXES, Floorplan, read_map_yaml
+from .floorplan import Floorplan
+from .raster_files import MAP_YAML_SUFFIXES, read_map_yaml
 from .vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan, load_vector_yaml
 
 

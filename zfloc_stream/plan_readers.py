@@ -17,7 +17,7 @@ from scipy.integrate import IntegrationWarning
 
 from .documents import MAX_NESTING, real_number, too_deep
 from .errors import FloorplanError
-from .floorplan import MAX_COORDINATE
+from .raster_files import MAX_COORDINATE
 
 
 VECTOR_SUFFIXES = (".dxf", ".svg", ".geojson", ".json")

@@ -44,7 +44,8 @@ import yaml
 from .config import Settings
 from .documents import real_number
 from .errors import FloorplanError
-from .floorplan import Floorplan, check_plan_budget
+from .floorplan import Floorplan
+from .raster_files import check_plan_budget
 from .geometry import CircleSet, LineSet, deduplicate_lines
 from .plan_readers import ARC_CHORD, CIRCLE_FIT_TOLERANCE, MIN_CIRCLE_VERTICES, VECTOR_SUFFIXES, VectorGeometry, read_dxf, read_geojson, read_svg
 from .segment_merging import merge_collinear
