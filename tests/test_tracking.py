@@ -354,13 +354,13 @@ def test_with_nothing_tracked_a_clearly_better_newcomer_is_reported_before_it_is
     appears with a much better score: its pose is reported at once, status still waits
     for confirmation; a newcomer only slightly better does not take over."""
     s = TrackingSettings()
-    for gain, reported in ((2 * s.lost_score_gap, TRUE), (0.5 * s.lost_score_gap, MIRROR)):
+    for gain, reported in ((2 * s.newcomer_score_gap, TRUE), (0.5 * s.newcomer_score_gap, MIRROR)):
         rng = make_rng(4, "newcomer")
         # a low-scoring wrong mode found alone for two rounds: confirmed, ambiguous
         # against nothing, but never dominating enough to be tracked with a rival
         tracker = HypothesisTracker(s)
         run_rounds(tracker, 0, 2, lambda r: [seen(MIRROR, rng, r, 0.05), seen(FAR, rng, r, 0.04)])
-        assert tracker.status == "ambiguous" and tracker._tracked_id is None
+        assert tracker.status == "ambiguous" and tracker.tracked_mode is None
         tracker.update([seen(TRUE, rng, 2, 0.05 + gain), seen(MIRROR, rng, 2, 0.05), seen(FAR, rng, 2, 0.04)], sensor_at(2), frame=10)
         assert tracker.status != "tracking"
         assert implied_error(tracker.best.alignment, reported, sensor_at(2)) < 0.3

@@ -424,6 +424,12 @@ class HypothesisTracker:
 
     # --- views ------------------------------------------------------------------------
     @property
+    def tracked_mode(self) -> Mode | None:
+        """The mode being tracked (None while initializing, ambiguous before any mode was
+        tracked, or lost)."""
+        return self._mode_by_id(self._tracked_id)
+
+    @property
     def best(self) -> Mode | None:
         """The reported mode (tracking_policy.reported_mode): the tracked mode while no
         established rival outweighs it; else the heaviest confirmed mode, else the
