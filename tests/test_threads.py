@@ -125,46 +125,46 @@ def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, c
     assert wanted <= set(split_everything)
 
 
-def test_observation_jobs_on_threads_give_the_serial_observation():
-    """The BEV observation's clustering, line extraction and clearance run side by side;
-    the circle fits draw after the lines: the same observation (a pillar included)."""
+def office_snapshot():
+    """A BEV snapshot of 20 laser scans through the office scene, passing a pillar."""
     from zfloc_stream.config import load_settings
     from zfloc_stream.frontend.bev import RollingBEV
-    from zfloc_stream.rng import make_rng
 
     scene = build_scene("office", seed=0)
     bev = RollingBEV(load_settings())
-    for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:  # passes a pillar
+    for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:
         bev.add(frame)
-    snapshot = bev.snapshot()
+    return bev.snapshot()
+
+
+def assert_same_observations(a, b, circles=True):
+    for name in ("wall_points", "free", "clearance"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    for x, y in ((a.lines, b.lines),) + (((a.circles, b.circles),) if circles else ()):
+        for u, v in zip(x.__dict__.values(), y.__dict__.values()):
+            assert np.array_equal(u, v)
+
+
+def test_observation_jobs_on_threads_give_the_serial_observation():
+    """The BEV observation's clustering, line extraction and clearance run side by side;
+    the circle fits draw after the lines: the same observation (a pillar included)."""
+    from zfloc_stream.rng import make_rng
+
+    snapshot = office_snapshot()
     serial = snapshot.observation(make_rng(0, "obs"))
     with threads.limit(3):
         side_by_side = snapshot.observation(make_rng(0, "obs"))
     assert len(serial.circles) >= 1 and len(serial.lines) > 5
-    for name in ("wall_points", "free", "clearance"):
-        assert np.array_equal(getattr(side_by_side, name), getattr(serial, name))
-    for a, b in ((side_by_side.lines, serial.lines), (side_by_side.circles, serial.circles)):
-        for x, y in zip(a.__dict__.values(), b.__dict__.values()):
-            assert np.array_equal(x, y)
-
+    assert_same_observations(side_by_side, serial)
 
 
 def test_an_observation_without_circles_keeps_everything_else():
     """A floorplan without pillars cannot match a BEV circle, so rounds ask for none
     (circles=False): no circles, and the same lines, walls, free mask and clearance."""
-    from zfloc_stream.config import load_settings
-    from zfloc_stream.frontend.bev import RollingBEV
     from zfloc_stream.rng import make_rng
 
-    scene = build_scene("office", seed=0)
-    bev = RollingBEV(load_settings())
-    for frame in list(simulate_laser(scene, LaserSimSettings(), seed=0, n_frames=80).frames)[:20]:  # passes a pillar
-        bev.add(frame)
-    snapshot = bev.snapshot()
+    snapshot = office_snapshot()
     full = snapshot.observation(make_rng(0, "obs"))
     lean = snapshot.observation(make_rng(0, "obs"), circles=False)
     assert len(full.circles) >= 1 and len(lean.circles) == 0
-    for name in ("wall_points", "free", "clearance"):
-        assert np.array_equal(getattr(lean, name), getattr(full, name))
-    for x, y in zip(lean.lines.__dict__.values(), full.lines.__dict__.values()):
-        assert np.array_equal(x, y)
+    assert_same_observations(lean, full, circles=False)
