@@ -10,6 +10,8 @@ a test module (importing a test file from another couples them and re-collects n
     frontend_scene   camera sequences with known walls (gravity, wall mask, BEV)
     ros2_bag         rosbag2 MCAP writers
     fuzz_inputs      hostile floorplans and settings
+    draw_helpers     a synthetic solver workload (BEV lines, a cluttered floorplan)
+    localizer_helpers  running a Localizer: odometry jumps, overrides, estimates as bytes
 
 This conftest puts the tests folder on sys.path (whatever pytest's import mode), so test
 files import them by name.
