@@ -12,6 +12,7 @@ a test module (importing a test file from another couples them and re-collects n
     fuzz_inputs      hostile floorplans and settings
     draw_helpers     a synthetic solver workload (BEV lines, a cluttered floorplan)
     localizer_helpers  running a Localizer: odometry jumps, overrides, estimates as bytes
+    shared_data      where ../shared/data lies (beside the checkout, else /work/shared/data)
 
 This conftest puts the tests folder on sys.path (whatever pytest's import mode), so test
 files import them by name.

@@ -2,13 +2,14 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.tools.cli import main
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
+SHARED = SHARED_DATA.parent
 
 
 def run_cli(*args):

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.datasets import detect_source, open_dataset
 from zfloc_stream.datasets.base import upright_camera_matrix
@@ -18,10 +20,8 @@ from zfloc_stream.sim2 import wrap_angle
 
 HERE = Path(__file__).resolve().parent
 GIBSON = HERE / "fixtures" / "gibson"
-SHARED = Path("/work/shared/data")
-INTEL = Path(__file__).resolve().parents[1] / "data" / "carmen" / "intel-corrected.log.gz"
-if not INTEL.is_file():
-    INTEL = SHARED / "carmen" / "intel-corrected.log.gz"
+SHARED = SHARED_DATA
+INTEL = SHARED / "carmen" / "intel-corrected.log.gz"
 SESSION = SHARED / "sessions" / "intel-camera-30" / "session.mcap"
 needs_intel = pytest.mark.skipif(not INTEL.is_file(), reason="Intel Carmen log not available")
 

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
 from zfloc_stream.floorplan import Floorplan
@@ -103,7 +105,7 @@ def _rot(theta: float) -> np.ndarray:
 
 
 EVAL_REAL = Path(__file__).resolve().parents[1] / "benchmarks" / "eval_real.py"
-INTEL_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" / "intel-corrected.log.gz"
+INTEL_LOG = SHARED_DATA / "carmen" / "intel-corrected.log.gz"
 
 
 @pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")

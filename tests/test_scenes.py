@@ -1,6 +1,5 @@
 """Built-in scenes: registry, determinism, plausible sizes, connectivity, doors, symmetry."""
 
-import importlib.util
 
 import numpy as np
 import pytest
@@ -172,8 +171,6 @@ def test_symmetric_waypoints(scenes):
     assert margin > 10.0  # farther than a 10 m sensor from both ends
 
 
-@pytest.mark.skipif(importlib.util.find_spec("zfloc_stream.floorplan") is None,
-                    reason="floorplan.py not there yet")
 def test_floorplan_and_ros_export(tmp_path, scenes):
     s = scenes[("rooms", 0)]
     fp = s.floorplan

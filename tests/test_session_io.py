@@ -1,7 +1,6 @@
 """SessionWriter + read_session: round trips, Foxglove compatibility, files of other tools."""
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +11,8 @@ from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
 from session_helpers import camera_frames, fake_estimate, laser_frames, write_fake_session
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.frames import CameraFrame
@@ -19,9 +20,7 @@ from zfloc_stream.pose_interpolation import interpolate_pose
 from zfloc_stream.session import SessionWriter, read_session
 from zfloc_stream.session import schemas as S
 
-INTEL = Path("/work/shared/data/sessions/intel-camera-30")
-if not INTEL.exists():  # the repository copy, if the shared folder is not mounted
-    INTEL = Path(__file__).resolve().parents[1] / "data" / "sessions" / "intel-camera-30"
+INTEL = SHARED_DATA / "sessions" / "intel-camera-30"
 
 
 def test_camera_round_trip_is_exact(tmp_path):

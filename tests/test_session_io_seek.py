@@ -15,6 +15,8 @@ from mcap.writer import Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 from session_helpers import camera_frames, laser_frames, write_fake_session
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.datasets.mcap import session_sequence
 from zfloc_stream.errors import SessionLogError
@@ -25,7 +27,7 @@ from zfloc_stream.session import schemas as S
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "replay").glob("*.mcap"))
-SHARED = sorted(Path("/work/shared/data/sessions").glob("*/session.mcap"))  # other tools' files, when mounted
+SHARED = sorted((SHARED_DATA / "sessions").glob("*/session.mcap"))  # other tools' files, when mounted
 
 
 def _same_message(a, b) -> bool:

@@ -11,13 +11,13 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 from session_helpers import record_laser_session
 
+from shared_data import SHARED_DATA
+
 from zfloc_stream.session import read_session
 from zfloc_stream.session import schemas as S
 from zfloc_stream.tools.replay_cli import main
 
-INTEL = Path("/work/shared/data/sessions/intel-camera-30")
-if not INTEL.exists():
-    INTEL = Path(__file__).resolve().parents[1] / "data" / "sessions" / "intel-camera-30"
+INTEL = SHARED_DATA / "sessions" / "intel-camera-30"
 N = 30
 
 
