@@ -113,6 +113,7 @@ def test_real_building_benchmark_ci_subset(monkeypatch):
     """One held-out Intel window through benchmarks/eval_real.py, online and reference
     (the full table: python benchmarks/eval_real.py)."""
     eval_real = _eval_real()
+    monkeypatch.setattr(eval_real, "DATA", INTEL_LOG.parent)  # the benchmark looks beside the checkout only
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
     assert row["success"] and row["ref_success"], row
     assert row["first_pose_frame"] == Settings().localizer.every_k_frames - 1  # a pose from round 1
