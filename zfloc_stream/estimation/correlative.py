@@ -88,7 +88,7 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
     import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
 
     near, origin = _near_wall_mask(floorplan, cell, tolerance)
-    pad = 16 * int(np.ceil(half / 16))
+    pad = FFT_PAD_MULTIPLE * int(np.ceil(half / FFT_PAD_MULTIPLE))
     key = ("spectrum", float(cell), float(tolerance), pad)
     try:
         cached = _MASKS.setdefault(floorplan, {})
@@ -110,6 +110,10 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
 # Largest distance of a float32 correlation value from its integer (the count it stands
 # for) that the fast pass accepts; beyond it, the angle is recomputed in float64. Seen on
 # the real buildings: ~1e-4.
+# The floorplan mask is padded by the search's half-width rounded up to a multiple of this
+# many cells: nearby half-widths share one cached spectrum and the FFT sizes stay smooth.
+FFT_PAD_MULTIPLE = 16
+
 _ROUNDING_SLACK = 0.25
 
 

@@ -41,7 +41,7 @@ from ..config import ScoringSettings
 from ..errors import InputError
 from ..geometry import LineSet
 from ..observation import BevObservation
-from .views import DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (transform_points: public here too)
+from .views import COARSE_FAR, DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (transform_points: public here too)
 from ..sim2 import wrap_angle
 from ..numba_support import njit
 from ..ties import descending, tie_keys
@@ -109,6 +109,14 @@ class FaceField:
 _MIN_LOOKUPS_PER_THREAD = 200_000
 _MIN_VIOLATION_MODELS_PER_THREAD = 64  # violation: a model reads the floorplan walls under its footprint
 
+# Greedy distinct-pose suppression runs on a prefix of the ranked models (it never looks
+# ahead, so a prefix yields the same first survivors as the whole list). The first prefix
+# holds PREFIX_PER_KEPT models per wanted survivor, at least PREFIX_MIN, and grows
+# PREFIX_GROWTH-fold while it yields too few: work sizes only, the result does not depend on them.
+PREFIX_MIN = 256
+PREFIX_PER_KEPT = 16
+PREFIX_GROWTH = 4
+
 
 def _model_ranges(n_models: int, n_points: int) -> list[tuple[int, int]]:
     return threads.ranges(n_models, _MIN_LOOKUPS_PER_THREAD // max(1, n_points) + 1)
@@ -148,9 +156,9 @@ def _coarse_kernel(models, c, sn, inv, ox, oy, px, py, grid, h, w, index_type, o
             # index also spares numba's negative-index wraparound test
             q = grid[index_type(np.int32(y) * w + np.int32(x))]
             total += q
-            far += q == 255
+            far += q == COARSE_FAR
         near = n - far
-        spread = total / (255.0 * n)
+        spread = total / (float(COARSE_FAR) * n)
         out[i] = (near - spread / (1.0 + 1.0 / n)) / n
 
 
@@ -280,7 +288,7 @@ def top_distinct(models: np.ndarray, coarse: np.ndarray, anchor: np.ndarray, set
     if n == 0 or limit <= 0:
         return np.zeros(0, dtype=np.int64)
     max_angle = float(np.deg2rad(settings.distinct_angle_deg))
-    length = min(n, max(256, 16 * limit))
+    length = min(n, max(PREFIX_MIN, PREFIX_PER_KEPT * limit))
     while True:
         order = descending_prefix(coarse, length)
         rows = models[order]
@@ -291,7 +299,7 @@ def top_distinct(models: np.ndarray, coarse: np.ndarray, anchor: np.ndarray, set
                                         max_angle, limit, kept)
         if count >= limit or len(order) >= n:
             return order[kept[:count]]
-        length = min(n, 4 * len(order))
+        length = min(n, PREFIX_GROWTH * len(order))
 
 
 class FloorplanScorer:
@@ -314,9 +322,9 @@ class FloorplanScorer:
         # outermost ring is 255 so points clamped onto the border from outside the grid
         # count as far from any wall (no separate inside test needed).
         self.cap = settings.tau_c + 0.5 * self.resolution
-        coarse = np.where(field < self.cap, np.floor(field / self.cap * 255.0), 255.0).astype(np.uint8)
-        coarse[[0, -1], :] = 255
-        coarse[:, [0, -1]] = 255
+        coarse = np.where(field < self.cap, np.floor(field / self.cap * float(COARSE_FAR)), float(COARSE_FAR)).astype(np.uint8)
+        coarse[[0, -1], :] = COARSE_FAR
+        coarse[:, [0, -1]] = COARSE_FAR
         self.coarse_field = np.ascontiguousarray(coarse).ravel()
         self._torch_kernels: dict[str, object] = {}  # scoring_kernels' TorchScorer per device
         # Cv's floorplan wall points, sorted into square buckets (row-major) so the points
@@ -535,14 +543,14 @@ def distinct(models: np.ndarray, anchor: np.ndarray, settings: ScoringSettings, 
     max_angle = np.deg2rad(settings.distinct_angle_deg)
     # Greedy suppression in order never looks ahead, so running it on a prefix gives the
     # same first survivors as on the whole list: grow the prefix only when it runs dry.
-    block = min(n, max(256, 16 * limit))
+    block = min(n, max(PREFIX_MIN, PREFIX_PER_KEPT * limit))
     kept = np.empty(limit, dtype=np.int64)
     x, y, ang = (np.ascontiguousarray(a) for a in (pos[:, 0], pos[:, 1], ang))
     while True:
         count = _greedy_distinct_kernel(x[:block], y[:block], ang[:block], float(settings.distinct_translation), float(max_angle), limit, kept)
         if count >= limit or block >= n:
             return kept[:count].copy()
-        block = min(n, 4 * block)
+        block = min(n, PREFIX_GROWTH * block)
 
 
 @dataclass(frozen=True)

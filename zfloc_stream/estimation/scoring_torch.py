@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..torch_support import choose_device, require_torch
-from .views import DEEP_FREE, FREE, transform_points
+from .views import COARSE_FAR, DEEP_FREE, FREE, transform_points
 
 _CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk
 
@@ -82,9 +82,9 @@ class TorchScorer:
             row = torch.clamp(b * px + a * py + cv, 0, h - 1).to(torch.int64)
             q = _gather(field, row * w + col)
             sums.append(q.sum(dim=1, dtype=torch.int64))
-            nears.append((q != 255).sum(dim=1))
+            nears.append((q != COARSE_FAR).sum(dim=1))
         near = torch.cat(nears).cpu().numpy()
-        spread = torch.cat(sums).cpu().numpy() / (255.0 * n)
+        spread = torch.cat(sums).cpu().numpy() / (float(COARSE_FAR) * n)
         out[:] = (near - spread / (1.0 + 1.0 / n)) / n
         return out
 

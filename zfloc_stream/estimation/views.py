@@ -13,6 +13,10 @@ from ..observation import BevObservation
 
 UNSEEN, FREE, DEEP_FREE, WALL = 0, 1, 2, 3  # BevView.state codes
 
+# The floorplan's coarse grid (FloorplanScorer.coarse, uint8) codes "at least cap from any
+# wall" as the top of the uint8 range; the codes below it quantise distances in [0, cap).
+COARSE_FAR = 255
+
 
 def transform_points(models: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(H, N, 2): every point mapped by every model."""

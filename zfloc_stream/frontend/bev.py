@@ -49,6 +49,17 @@ from .wallmask import refine_wall_points, upright_rotation
 
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
 
+# Scan matching reads the wall grid on a crop around the frame's hits, widened by this many
+# times bev.scan_match_max_shift: points moved by up to the largest correction still see the
+# walls they may match; a crop under SCAN_MATCH_MIN_CROP_CELLS on a side has no interior for
+# the distance field's gradient, so the frame is fused uncorrected.
+SCAN_MATCH_CROP_MARGIN_SHIFTS = 2
+SCAN_MATCH_MIN_CROP_CELLS = 3
+
+# The per-intrinsics ray tables are dropped once more than this many are held: cameras rarely
+# change their intrinsics, so a few suffice.
+RAY_CACHE_SIZE = 4
+
 
 class RollingBEV:
     """Bounded BEV of the last window_radius metres around the sensor.
@@ -194,12 +205,12 @@ class RollingBEV:
             return
         hits = self._correct_points(hits_odom)
         centre = np.array(self._corrected(*odom_pose)[:2])
-        margin = 2 * b.scan_match_max_shift
+        margin = SCAN_MATCH_CROP_MARGIN_SHIFTS * b.scan_match_max_shift
         lo = np.floor((hits.min(axis=0) - margin) / g.res).astype(int) - [g.ix0, g.iy0]
         hi = np.ceil((hits.max(axis=0) + margin) / g.res).astype(int) - [g.ix0, g.iy0]
         c0, r0 = np.clip(lo, 0, g.n)
         c1, r1 = np.clip(hi, 0, g.n)
-        if c1 - c0 < 3 or r1 - r0 < 3:
+        if c1 - c0 < SCAN_MATCH_MIN_CROP_CELLS or r1 - r0 < SCAN_MATCH_MIN_CROP_CELLS:
             return
         mask = wall_cells(g.wall[r0:r1, c0:c1], g.hits[r0:r1, c0:c1], g.logodds[r0:r1, c0:c1], b)
         origin = np.array([(g.ix0 + c0) * g.res, (g.iy0 + r0) * g.res])
@@ -248,7 +259,7 @@ class RollingBEV:
         key = (depth.shape, K.tobytes())
         rays = self._ray_cache.get(key)
         if rays is None:
-            if len(self._ray_cache) > 4:  # bounded: intrinsics rarely change
+            if len(self._ray_cache) > RAY_CACHE_SIZE:  # bounded: intrinsics rarely change
                 self._ray_cache.clear()
             v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]]
             pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
