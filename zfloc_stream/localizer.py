@@ -72,7 +72,8 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
-            if self.monitor.wants_global_search(self.tracker.status == "tracking", self._tracked_alignment(), self.bev.last_wall_hits):
+            tracking = self.tracker.status == "tracking"  # only a tracked alignment is watched
+            if self.monitor.wants_global_search(tracking, self.tracker.best.alignment if tracking else None, self.bev.last_wall_hits):
                 self.rounds.request_global_search()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
@@ -166,10 +167,6 @@ class Localizer:
         if outcome is not None:
             outcome.timings["local_refinement"] = timings["local_refinement"]
             outcome.cpu_timings["local_refinement"] = time.thread_time() - c0
-
-    def _tracked_alignment(self):
-        best = self.tracker.best
-        return None if best is None else best.alignment
 
     # ------------------------------------------------------------------------------
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:

@@ -14,7 +14,6 @@ reaches on the same points, against which the online RANSAC localizer is measure
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -27,6 +26,7 @@ from ..geometry import LineSet
 from ..numba_support import njit
 from ..sim2 import Sim2, wrap_angle
 from ..field_fit import refine_batch
+from .plan_cache import cached_per_floorplan
 
 
 @dataclass(frozen=True)
@@ -46,27 +46,22 @@ def thin_to_grid(points: np.ndarray, cell: float) -> np.ndarray:
     return points[np.sort(first)]
 
 
-_MASKS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def _near_wall_mask(floorplan, cell: float, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """float32 mask (1 within `tolerance` of a wall) on a `cell` grid over the floorplan and
     the world position of its cell (0, 0) centre; cached per floorplan object."""
-    key = (float(cell), float(tolerance))
-    try:
-        cached = _MASKS.setdefault(floorplan, {})
-    except TypeError:  # not weak-referenceable: no caching
-        cached = {}
-    if key not in cached:
-        x0, y0, x1, y1 = floorplan.extent
-        cols = int(np.ceil((x1 - x0) / cell))
-        rows = int(np.ceil((y1 - y0) / cell))
-        xs = x0 + (np.arange(cols) + 0.5) * cell
-        ys = y0 + (np.arange(rows) + 0.5) * cell
-        gx, gy = np.meshgrid(xs, ys)
-        near = floorplan.distance(np.column_stack([gx.ravel(), gy.ravel()])).reshape(rows, cols) < tolerance
-        cached[key] = (near.astype(np.float32), np.array([xs[0], ys[0]]))
-    return cached[key]
+    return cached_per_floorplan(floorplan, ("near-wall mask", float(cell), float(tolerance)), None,
+                                lambda: _build_near_wall_mask(floorplan, cell, tolerance))
+
+
+def _build_near_wall_mask(floorplan, cell: float, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    x0, y0, x1, y1 = floorplan.extent
+    cols = int(np.ceil((x1 - x0) / cell))
+    rows = int(np.ceil((y1 - y0) / cell))
+    xs = x0 + (np.arange(cols) + 0.5) * cell
+    ys = y0 + (np.arange(rows) + 0.5) * cell
+    gx, gy = np.meshgrid(xs, ys)
+    near = floorplan.distance(np.column_stack([gx.ravel(), gy.ravel()])).reshape(rows, cols) < tolerance
+    return near.astype(np.float32), np.array([xs[0], ys[0]])
 
 
 @dataclass(frozen=True)
@@ -85,26 +80,24 @@ def _mask_spectrum(floorplan, cell: float, tolerance: float, half: int):
     """The near-wall mask padded by at least `half` zero cells (rounded up to 16 so calls
     share it), its FFT (cached per floorplan), the padded shape and the world centre of
     the padded cell (0, 0)."""
-    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
-
     near, origin = _near_wall_mask(floorplan, cell, tolerance)
     pad = FFT_PAD_MULTIPLE * int(np.ceil(half / FFT_PAD_MULTIPLE))
-    key = ("spectrum", float(cell), float(tolerance), pad)
-    try:
-        cached = _MASKS.setdefault(floorplan, {})
-    except TypeError:
-        cached = {}
-    if key not in cached:
-        mask = np.pad(near, pad)
-        fft_shape = (sfft.next_fast_len(mask.shape[0], real=True), sfft.next_fast_len(mask.shape[1], real=True))
-        values = sfft.rfft2(mask, s=fft_shape)
-        # rows / columns past the compact shape are bottom / right padding (zeros): s=
-        # crops them, which is the same as wrapping them onto the top / left padding
-        compact_shape = (sfft.next_fast_len(near.shape[0] + pad, real=True), sfft.next_fast_len(near.shape[1] + pad, real=True))
-        compact = sfft.rfft2(mask, s=compact_shape).astype(np.complex64)
-        cached[key] = (_Spectrum(values, fft_shape, values.astype(np.complex64), compact, compact_shape), mask.shape)
-    spectrum, shape = cached[key]
+    spectrum, shape = cached_per_floorplan(floorplan, ("mask spectrum", float(cell), float(tolerance), pad), None,
+                                           lambda: _build_spectrum(near, pad))
     return spectrum, shape, origin - pad * cell
+
+
+def _build_spectrum(near: np.ndarray, pad: int):
+    import scipy.fft as sfft  # here, not at import: ~0.3 s a CLI error must not pay
+
+    mask = np.pad(near, pad)
+    fft_shape = (sfft.next_fast_len(mask.shape[0], real=True), sfft.next_fast_len(mask.shape[1], real=True))
+    values = sfft.rfft2(mask, s=fft_shape)
+    # rows / columns past the compact shape are bottom / right padding (zeros): s=
+    # crops them, which is the same as wrapping them onto the top / left padding
+    compact_shape = (sfft.next_fast_len(near.shape[0] + pad, real=True), sfft.next_fast_len(near.shape[1] + pad, real=True))
+    compact = sfft.rfft2(mask, s=compact_shape).astype(np.complex64)
+    return _Spectrum(values, fft_shape, values.astype(np.complex64), compact, compact_shape), mask.shape
 
 
 # Largest distance of a float32 correlation value from its integer (the count it stands

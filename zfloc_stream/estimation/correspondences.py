@@ -7,7 +7,6 @@ samples (the same structures on the BEV's primitives), with the pruning of ransa
 from __future__ import annotations
 
 import warnings
-import weakref
 
 import numpy as np
 from typing import Sequence
@@ -17,6 +16,7 @@ from ..geometry import CircleSet, LineSet
 from ..observation import BevObservation
 from ..primitives import deduplicate_lines
 from .draws import admissible_triplets
+from .plan_cache import cached_per_floorplan
 from .solvers import normal_angle
 
 
@@ -220,23 +220,9 @@ class FloorplanMatches:
         self.circle_pairs, self.circle_dist = cpairs[order], dist[order]
 
 
-_MATCHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
     key = (solvers.normal_consistency, solvers.parallel_angle_deg, solvers.min_baseline, solvers.min_scale)
-    try:
-        cached = _MATCHES.get(floorplan)
-    except TypeError:
-        return FloorplanMatches(floorplan, solvers)
-    if cached is not None and cached[0] == key:
-        return cached[1]
-    matches = FloorplanMatches(floorplan, solvers)
-    try:
-        _MATCHES[floorplan] = (key, matches)
-    except TypeError:
-        pass
-    return matches
+    return cached_per_floorplan(floorplan, "ransac tuples", key, lambda: FloorplanMatches(floorplan, solvers))
 
 
 # --------------------------------------------------------------------------------------

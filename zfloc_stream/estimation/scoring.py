@@ -45,6 +45,7 @@ from .views import COARSE_FAR, DEEP_FREE, FREE, BevView, implied_poses, transfor
 from ..sim2 import wrap_angle
 from ..numba_support import njit
 from ..ties import descending, tie_keys
+from .plan_cache import cached_per_floorplan
 
 # --------------------------------------------------------------------------------------
 # floorplan-side precomputation (cached per floorplan object)
@@ -307,8 +308,8 @@ class FloorplanScorer:
     for Cv), built once per floorplan object and settings."""
 
     def __init__(self, floorplan, settings: ScoringSettings):
-        # weak: the scorer is cached in a WeakKeyDictionary keyed by this floorplan, and a
-        # strong reference from the value would keep every floorplan (and its caches) alive
+        # weak: the scorer is cached beside this floorplan, weakly keyed (plan_cache.py), and
+        # a strong reference from the value would keep every floorplan (and its caches) alive
         self._floorplan = weakref.ref(floorplan)
         self.face_field = FaceField.of(floorplan)
         field = self.face_field.distance_field
@@ -450,24 +451,10 @@ class FloorplanScorer:
         return out
 
 
-_SCORERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
     """The cached FloorplanScorer of this floorplan object (rebuilt if settings changed)."""
     key = (settings.tau_c, settings.wall_bucket_size)
-    try:
-        cached = _SCORERS.get(floorplan)
-    except TypeError:  # not weak-referenceable / hashable: no caching
-        return FloorplanScorer(floorplan, settings)
-    if cached is not None and cached[0] == key:
-        return cached[1]
-    scorer = FloorplanScorer(floorplan, settings)
-    try:
-        _SCORERS[floorplan] = (key, scorer)
-    except TypeError:
-        pass
-    return scorer
+    return cached_per_floorplan(floorplan, "scorer", key, lambda: FloorplanScorer(floorplan, settings))
 
 
 def scoring_kernels(floorplan, settings: ScoringSettings):
