@@ -72,8 +72,12 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
-            tracking = self.tracker.status == "tracking"  # only a tracked alignment is watched
-            if self.monitor.wants_global_search(tracking, self.tracker.best.alignment if tracking else None, self.bev.last_wall_hits):
+            tracked = self.tracker.best if self.tracker.status == "tracking" else None  # only a tracked alignment is watched
+            if self.monitor.wants_global_search(None if tracked is None else tracked.id, None if tracked is None else tracked.alignment,
+                                                self.bev.last_wall_hits):
+                # the tracked alignment stopped explaining the frames: search globally, on
+                # what those frames saw (older evidence may be of another place)
+                self.bev.forget_older(lc.monitor_frames)
                 self.rounds.request_global_search()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
@@ -180,7 +184,7 @@ class Localizer:
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
-        consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits)
+        consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits, best.id)
         status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose

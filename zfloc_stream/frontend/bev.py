@@ -133,6 +133,13 @@ class RollingBEV:
         self.last_wall_hits = np.zeros((0, 2))
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
+    def forget_older(self, frames: int) -> None:
+        """Keep only what the last `frames` fused frames touched (e.g. the sensor was
+        carried off: the place the older frames saw is not where it is now); unlike
+        clear_map, the plane frame (scan matching's correction) stays, so alignments to the
+        floorplan stay valid."""
+        self.grid.forget_older(frames)
+
     @property
     def pending_frames(self) -> int:
         return len(self._pending)

@@ -25,6 +25,10 @@ class LocalizerSettings(Section):
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
     monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
     monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
+    # a frame explaining less than this fraction of the tracked mode's usual share (the median
+    # over its last monitor_reference_frames consistent frames) is inconsistent too
+    monitor_relative_share: float = Field(0.5, ge=0, le=1)
+    monitor_reference_frames: int = Field(20, ge=1, le=10_000)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,
