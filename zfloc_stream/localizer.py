@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,6 +37,15 @@ from .frontend.bev import RollingBEV
 from .monitor import ConsistencyMonitor
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
+
+
+@dataclass
+class KidnapTest:
+    """The hypothesis that the sensor was carried off (see Localizer._kidnap_round)."""
+
+    since: int  # BEV stamp of the first frame of the monitor's inconsistent run
+    tracker: HypothesisTracker  # its own filter bank, fed by rounds on what frames from `since` on saw
+    rounds_left: int
 
 
 class Localizer:
@@ -61,6 +71,7 @@ class Localizer:
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
+        self._kidnap: KidnapTest | None = None  # the running kidnap test
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -72,13 +83,12 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
-            tracked = self.tracker.best if self.tracker.status == "tracking" else None  # only a tracked alignment is watched
-            if self.monitor.wants_global_search(None if tracked is None else tracked.id, None if tracked is None else tracked.alignment,
+            # only a tracked alignment is watched, as reported (the local refinement's)
+            tracked = self.tracker.best if self.tracker.status == "tracking" else None
+            if self.monitor.wants_global_search(None if tracked is None else tracked.id,
+                                                None if tracked is None else self.local.alignment_of_mode(tracked),
                                                 self.bev.last_wall_hits):
-                # the tracked alignment stopped explaining the frames: search globally, on
-                # what those frames saw (older evidence may be of another place)
-                self.bev.forget_older(lc.monitor_frames)
-                self.rounds.request_global_search()
+                self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         if plane_pose is not None and self.frames_fused % lc.every_k_frames == 0:
@@ -144,6 +154,16 @@ class Localizer:
         except ZflocError:
             snapshot = None
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted
+        test = self._kidnap
+        if test is not None:
+            # the kidnap test's round: a global search on the frames since the run, the old
+            # place among its warm starts so that it competes on the same evidence
+            try:
+                snapshot = self.bev.snapshot(copy=copy, since=test.since)
+            except ZflocError:
+                snapshot = None
+            old = [] if self.tracker.best is None else [self.tracker.best.alignment]
+            return RoundJob(index, snapshot, test.tracker.warm_start() + old, False, test.since)
         return RoundJob(index, snapshot, self.tracker.warm_start(), tracked)
 
     def _apply(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
@@ -151,6 +171,8 @@ class Localizer:
         local refinement follows the tracked mode. Returns why the round did not run (None
         when it did)."""
         self.last_round = outcome
+        if scheduled.job.since:
+            return self._kidnap_round(scheduled, outcome, timings)
         if outcome.observation is None:
             return outcome.skipped
         self.last_observation = outcome.observation
@@ -163,6 +185,71 @@ class Localizer:
         outcome.cpu_timings["tracking"] = time.thread_time() - c0
         self._refine_locally(timings, outcome)
         return None
+
+    # ------------------------------------------------------------------------------
+    # The kidnap test. A run of frames the tracked alignment does not explain (the monitor)
+    # is the sensor seeing what the map lacks (a room left out, clutter), or another place
+    # than the tracked one (a kidnap, a slipped wheel, a wrong mode). Only in the second
+    # case does the rest of the BEV show another place than the recent frames, so a
+    # global search on the whole BEV keeps finding the old place (the Carmen logs spliced
+    # at far-apart places: 26-87 frames to recover). So the hypothesis "carried off" gets
+    # its own filter bank, fed by global rounds on what the frames from the run's start on
+    # saw alone, and must earn `tracking` there by the tracker's own rules, as after a loss
+    # (confirm_rounds_after_loss hits, dominance, no close rival). If it does, at another
+    # place than the tracked mode's, it replaces the tracker and the BEV forgets what only
+    # older frames saw. If it has not after confirm_rounds_after_loss + 1 rounds, the test
+    # ends and nothing is lost: the BEV and the tracker are as they were, and the next
+    # round searches globally on the whole BEV. Meanwhile no frame is `tracking`.
+    def _start_kidnap_test(self) -> None:
+        if self._kidnap is None:
+            shadow = HypothesisTracker(self.settings.tracking)
+            shadow.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
+            self._kidnap = KidnapTest(self.bev.stamp - self.settings.localizer.monitor_frames + 1, shadow,
+                                      self.settings.tracking.confirm_rounds_after_loss + 1)
+
+    def _better_place(self, found, old, sensor_xy) -> bool:
+        """Is the kidnap test's tracked mode another place than the tracked one (beyond the
+        tracker's pose-jump gate), and does it explain the recent frames' hits as the
+        monitor wants them explained (against the old mode's usual share) and better than
+        the old place does? A short stretch of corridor alone fits many places along it:
+        the test's bank can single one out on thin evidence."""
+        if old is None:
+            return True
+        old_alignment = self.local.alignment_of_mode(old)
+        if not self.tracker.pose_jumped(old_alignment, found.alignment, sensor_xy, old):
+            return False
+        hits = [h for h in self._recent_hits if len(h)]
+        if not hits:
+            return False
+        hits = np.concatenate(hits)
+        share = self.monitor.share(found.alignment, hits)
+        return share is not None and self.monitor.explains(share, self.monitor.usual_share(old.id)) \
+            and share > self.monitor.share(old_alignment, hits)
+
+    def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
+        """A kidnap test's round landed: feed its bank, then adopt it, go on or end the
+        test. Returns why the round did not count (None when it did)."""
+        test = self._kidnap
+        if test is None or test.since != scheduled.job.since:
+            return "kidnap test over: its last round is dropped"
+        test.rounds_left -= 1
+        if outcome.result is not None:
+            self.last_observation, self.last_result = outcome.observation, outcome.result
+            test.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
+        found, old = test.tracker.best, self.tracker.best
+        if test.tracker.status == "tracking" and self._better_place(found, old, scheduled.plane_pose[:2]):
+            # carried off: the new place is tracked, the old place's evidence goes
+            self.tracker, self._kidnap = test.tracker, None
+            self.bev.forget_before(test.since)
+            self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
+            self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+            self._refine_locally(timings, outcome)
+            return None
+        if test.rounds_left <= 0 or test.tracker.status == "tracking":
+            self._kidnap = None  # not carried off (or carried back): as before the test
+            self.rounds.request_global_search()
+            return "kidnap test ended: no other place earned tracking"
+        return outcome.skipped
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()
@@ -185,6 +272,8 @@ class Localizer:
             score = float(best.score)
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
         consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits, best.id)
+        if self._kidnap is not None and alignment is not None:
+            consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
         status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose

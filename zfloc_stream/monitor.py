@@ -72,7 +72,11 @@ class ConsistencyMonitor:
         share = self.share(alignment, hits)
         if share is None:
             return None
-        usual = self.usual_share(mode_id)
+        return self.explains(share, self.usual_share(mode_id))
+
+    def explains(self, share: float, usual: float | None) -> bool:
+        """The monitor's test: a share at least monitor_min_consistency and at least
+        monitor_relative_share of the usual share (when one is known)."""
         relative = usual is None or share >= self.settings.monitor_relative_share * usual
         return bool(share >= self.settings.monitor_min_consistency and relative)
 

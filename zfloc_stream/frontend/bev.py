@@ -133,12 +133,11 @@ class RollingBEV:
         self.last_wall_hits = np.zeros((0, 2))
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
-    def forget_older(self, frames: int) -> None:
-        """Keep only what the last `frames` fused frames touched (e.g. the sensor was
-        carried off: the place the older frames saw is not where it is now); unlike
-        clear_map, the plane frame (scan matching's correction) stays, so alignments to the
-        floorplan stay valid."""
-        self.grid.forget_older(frames)
+    def forget_before(self, stamp: int) -> None:
+        """Keep only what frames from this stamp on touched (the sensor was carried off:
+        the place older frames saw is not where it is now); unlike clear_map, the plane
+        frame (scan matching's correction) stays, so alignments to the floorplan stay valid."""
+        self.grid.forget_before(stamp)
 
     @property
     def pending_frames(self) -> int:
@@ -155,17 +154,23 @@ class RollingBEV:
     def observation(self, rng: np.random.Generator) -> BevObservation:
         return self.snapshot(copy=False).observation(rng)
 
-    def snapshot(self, copy: bool = True) -> "BevSnapshot":
+    @property
+    def stamp(self) -> int:
+        """Frames fused into the grid so far (the stamp of the latest)."""
+        return self.grid.stamp
+
+    def snapshot(self, copy: bool = True, since: int = 0) -> "BevSnapshot":
         """What observation() reads, frozen: a pipelined round extracts its observation on a
         worker while this BEV keeps fusing frames (copy=True copies the grid, ~3 MB at the
-        defaults, well under a millisecond)."""
+        defaults, well under a millisecond). since: only what frames from this stamp on
+        touched."""
         g = self.grid
         if g.ix0 is None:
             raise InputError("BEV is empty: no frame fused yet")
         arrays = (g.logodds, g.wall, g.hits, g.seen)
         if copy:
             arrays = tuple(a.copy() for a in arrays)
-        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings, g.stamp)
+        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings, g.stamp, since)
 
     # ------------------------------------------------------------------------------
     # lasers

@@ -38,10 +38,10 @@ class ScrollingGrid:
         self.ix0 += dx
         self.iy0 += dy
 
-    def forget_older(self, frames: int) -> None:
-        """Empty every cell no frame of the last `frames` touched (hit or freed): what
-        only older frames saw is gone, as if never seen."""
-        old = self.seen <= self.stamp - frames
+    def forget_before(self, stamp: int) -> None:
+        """Empty every cell no frame from this stamp on touched (hit or freed): what only
+        older frames saw is gone, as if never seen."""
+        old = self.seen < stamp
         for a in (self.logodds, self.wall, self.hits, self.seen):
             a[old] = 0
 
