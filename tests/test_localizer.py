@@ -125,6 +125,31 @@ def test_kidnapping_is_detected_and_recovered_within_30_frames(pipeline, lag):
     assert (err[-10:] < 1.0).all()
 
 
+def test_a_sensor_carried_off_is_found_again_by_the_kidnap_test():
+    """Carried to another place while its odometry stood still (the frames of a later
+    stretch, re-anchored): the tracked place stops explaining the frames, the kidnap test's
+    own bank tracks the new place on what the frames since saw, and the localizer adopts
+    it; no frame is `tracking` 1 m or more off meanwhile."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=150)
+    frames, k0 = list(seq), 50
+    later = frames[100:]
+    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(later[0].T_odom_cam)
+    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in later]
+    truth = list(seq.poses[:k0]) + list(seq.poses[100:])
+    assert np.linalg.norm(truth[k0][:2] - truth[k0 - 1][:2]) > 3.0  # really carried off
+    with Localizer(scene.floorplan, Settings()) as loc:
+        est = [loc.push(f) for f in spliced]
+        tests, found = loc.kidnap_tests, loc.kidnaps_found
+    err = np.array([np.inf if e.pose is None else np.linalg.norm(e.pose[:2] - p[:2]) for e, p in zip(est, truth)])
+    assert est[k0 - 1].status == "tracking" and err[k0 - 1] < 1.0
+    assert tests >= 1 and found == 1
+    recovered = next(k for k in range(k0, len(est)) if est[k].status == "tracking" and err[k] < 1.0)
+    assert recovered - k0 <= 30, [e.status for e in est[k0:]]
+    assert not any(e.status == "tracking" and v >= 1.0 for e, v in zip(est, err))
+    assert (err[-10:] < 1.0).all()
+
+
 def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
     scene = build_scene("rooms", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=12)

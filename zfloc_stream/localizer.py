@@ -12,16 +12,16 @@ current best alignment applied to the frame's odometry-plane pose, so every fram
 
 Where and when a round runs (inline, on a worker, joined at fixed frames):
 round_scheduler.py. The consistency monitor (monitor.py) watches each fused frame against
-the tracked alignment and asks for a global search when it stops explaining them; the
-local refinement (estimation/local_refinement.py) follows the tracked mode's drift on the
-recent frames' wall hits.
+the tracked alignment; when it stops explaining them, a kidnap test (kidnap_test.py) asks
+whether the sensor is at another place, on what those frames saw alone. The local
+refinement (estimation/local_refinement.py) follows the tracked mode's drift on the recent
+frames' wall hits.
 """
 
 from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,18 +34,10 @@ from .estimation.scoring import scoring_kernels
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import RollingBEV
+from .kidnap_test import KidnapTest, Verdict, better_place
 from .monitor import ConsistencyMonitor
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
-
-
-@dataclass
-class KidnapTest:
-    """The hypothesis that the sensor was carried off (see Localizer._kidnap_round)."""
-
-    since: int  # BEV stamp of the first frame of the monitor's inconsistent run
-    tracker: HypothesisTracker  # its own filter bank, fed by rounds on what frames from `since` on saw
-    rounds_left: int
 
 
 class Localizer:
@@ -71,7 +63,9 @@ class Localizer:
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
-        self._kidnap: KidnapTest | None = None  # the running kidnap test
+        self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
+        self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
+        self.kidnaps_found = 0  # of them, adopted: another place was tracked
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -154,16 +148,12 @@ class Localizer:
         except ZflocError:
             snapshot = None
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted
-        test = self._kidnap
-        if test is not None:
-            # the kidnap test's round: a global search on the frames since the run, the old
-            # place among its warm starts so that it competes on the same evidence
+        if self._kidnap is not None:  # its round: a global search on what the frames since its run saw
             try:
-                snapshot = self.bev.snapshot(copy=copy, since=test.since)
+                snapshot = self.bev.snapshot(copy=copy, since=self._kidnap.since)
             except ZflocError:
                 snapshot = None
-            old = [] if self.tracker.best is None else [self.tracker.best.alignment]
-            return RoundJob(index, snapshot, test.tracker.warm_start() + old, False, test.since)
+            return self._kidnap.job(index, snapshot, self.tracker.best)
         return RoundJob(index, snapshot, self.tracker.warm_start(), tracked)
 
     def _apply(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
@@ -187,66 +177,34 @@ class Localizer:
         return None
 
     # ------------------------------------------------------------------------------
-    # The kidnap test. A run of frames the tracked alignment does not explain (the monitor)
-    # is the sensor seeing what the map lacks (a room left out, clutter), or another place
-    # than the tracked one (a kidnap, a slipped wheel, a wrong mode). Only in the second
-    # case does the rest of the BEV show another place than the recent frames, so a
-    # global search on the whole BEV keeps finding the old place (the Carmen logs spliced
-    # at far-apart places: 26-87 frames to recover). So the hypothesis "carried off" gets
-    # its own filter bank, fed by global rounds on what the frames from the run's start on
-    # saw alone, and must earn `tracking` there by the tracker's own rules, as after a loss
-    # (confirm_rounds_after_loss hits, dominance, no close rival). If it does, at another
-    # place than the tracked mode's, it replaces the tracker and the BEV forgets what only
-    # older frames saw. If it has not after confirm_rounds_after_loss + 1 rounds, the test
-    # ends and nothing is lost: the BEV and the tracker are as they were, and the next
-    # round searches globally on the whole BEV. Meanwhile no frame is `tracking`.
     def _start_kidnap_test(self) -> None:
+        """The monitor saw the tracked place stop explaining the frames: test whether the
+        sensor was carried off (kidnap_test.py)."""
         if self._kidnap is None:
-            shadow = HypothesisTracker(self.settings.tracking)
-            shadow.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
-            self._kidnap = KidnapTest(self.bev.stamp - self.settings.localizer.monitor_frames + 1, shadow,
-                                      self.settings.tracking.confirm_rounds_after_loss + 1)
-
-    def _better_place(self, found, old, sensor_xy) -> bool:
-        """Is the kidnap test's tracked mode another place than the tracked one (beyond the
-        tracker's pose-jump gate), and does it explain the recent frames' hits as the
-        monitor wants them explained (against the old mode's usual share) and better than
-        the old place does? A short stretch of corridor alone fits many places along it:
-        the test's bank can single one out on thin evidence."""
-        if old is None:
-            return True
-        old_alignment = self.local.alignment_of_mode(old)
-        if not self.tracker.pose_jumped(old_alignment, found.alignment, sensor_xy, old):
-            return False
-        hits = [h for h in self._recent_hits if len(h)]
-        if not hits:
-            return False
-        hits = np.concatenate(hits)
-        share = self.monitor.share(found.alignment, hits)
-        return share is not None and self.monitor.explains(share, self.monitor.usual_share(old.id)) \
-            and share > self.monitor.share(old_alignment, hits)
+            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings)
+            self.kidnap_tests += 1
 
     def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
-        """A kidnap test's round landed: feed its bank, then adopt it, go on or end the
-        test. Returns why the round did not count (None when it did)."""
-        test = self._kidnap
+        """A kidnap test's round landed: adopt its bank (the BEV forgets what only older
+        frames saw), go on, or end the test. Returns why the round did not count."""
+        test, old = self._kidnap, self.tracker.best
         if test is None or test.since != scheduled.job.since:
             return "kidnap test over: its last round is dropped"
-        test.rounds_left -= 1
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
-            test.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
-        found, old = test.tracker.best, self.tracker.best
-        if test.tracker.status == "tracking" and self._better_place(found, old, scheduled.plane_pose[:2]):
-            # carried off: the new place is tracked, the old place's evidence goes
+        old_alignment = None if old is None else self.local.alignment_of_mode(old)
+        verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
+            found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2]))
+        if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
+            self.kidnaps_found += 1
             self.bev.forget_before(test.since)
             self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
             self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
             self._refine_locally(timings, outcome)
             return None
-        if test.rounds_left <= 0 or test.tracker.status == "tracking":
-            self._kidnap = None  # not carried off (or carried back): as before the test
+        if verdict is Verdict.NOT_CARRIED_OFF:
+            self._kidnap = None
             self.rounds.request_global_search()
             return "kidnap test ended: no other place earned tracking"
         return outcome.skipped

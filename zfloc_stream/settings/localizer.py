@@ -15,11 +15,11 @@ class LocalizerSettings(Section):
     min_wall_points: int = Field(100, ge=1, le=10_000_000)  # BEV wall cells needed before the first round
     min_primitives: int = Field(3, ge=1, le=1000)  # lines + circles needed before the first round
     # Per-frame consistency monitor: while tracking, each fused frame's wall points are
-    # checked against the tracked alignment. A run of frames the map does not explain is
-    # a part of the building the floorplan lacks, clutter, or an odometry jump; the
-    # monitor cannot tell them apart on real sensors, so it never drops the track or the
-    # BEV: it makes the next round a full global search, and the tracker decides from
-    # relative evidence (a rival that explains the data better) whether the track is lost.
+    # checked against the tracked alignment. A run of monitor_frames frames the map does
+    # not explain is a part of the building the floorplan lacks, clutter, or another place
+    # (a kidnap, an odometry jump, a wrong mode); the monitor cannot tell them apart, so it
+    # drops neither the track nor the BEV: it starts a kidnap test (kidnap_test.py), whose
+    # own filter bank must find a place that explains those frames better.
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
     monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
