@@ -66,6 +66,7 @@ class Localizer:
         self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
+        self._adopted_at = -1  # frame whose kidnap round was adopted last
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -86,8 +87,10 @@ class Localizer:
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         if plane_pose is not None and self.frames_fused % lc.every_k_frames == 0:
-            self.rounds.start(self.rounds.mode(has_pose=self.tracker.best is not None),
-                              lambda copy: self._round_job(index, copy), plane_pose, timings)
+            mode = self.rounds.mode(has_pose=self.tracker.best is not None)
+            self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
+            if self._kidnap is not None:  # the tracker goes on meanwhile: nothing is lost if the test fails
+                self.rounds.start(mode, lambda copy: self._kidnap_job(index, copy), plane_pose, timings)
             reasons += [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
             self._refine_locally(timings)  # follow the drift between rounds too
@@ -148,13 +151,15 @@ class Localizer:
         except ZflocError:
             snapshot = None
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted
-        if self._kidnap is not None:  # its round: a global search on what the frames since its run saw
-            try:
-                snapshot = self.bev.snapshot(copy=copy, since=self._kidnap.since)
-            except ZflocError:
-                snapshot = None
-            return self._kidnap.job(index, snapshot, self.tracker.best)
         return RoundJob(index, snapshot, self.tracker.warm_start(), tracked)
+
+    def _kidnap_job(self, index: int, copy: bool) -> RoundJob:
+        """The kidnap test's round: a global search on what the frames since its run saw."""
+        try:
+            snapshot = self.bev.snapshot(copy=copy, since=self._kidnap.since)
+        except ZflocError:
+            snapshot = None
+        return self._kidnap.job(index, snapshot, self.tracker.best)
 
     def _apply(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A round lands: the tracker updates as of the frame the round started at, then the
@@ -163,6 +168,8 @@ class Localizer:
         self.last_round = outcome
         if scheduled.job.since:
             return self._kidnap_round(scheduled, outcome, timings)
+        if scheduled.job.index < self._adopted_at:
+            return "round started before a kidnap was found: dropped"
         if outcome.observation is None:
             return outcome.skipped
         self.last_observation = outcome.observation
@@ -198,14 +205,16 @@ class Localizer:
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
             self.kidnaps_found += 1
+            self._adopted_at = scheduled.job.index  # rounds started before this worked for the old place
             self.bev.forget_before(test.since)
             self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
             self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
             self._refine_locally(timings, outcome)
             return None
         if verdict is Verdict.NOT_CARRIED_OFF:
+            # the test's global searches found no better place: the frames saw what the map
+            # lacks, and the tracker, which went on meanwhile, keeps its modes
             self._kidnap = None
-            self.rounds.request_global_search()
             return "kidnap test ended: no other place earned tracking"
         return outcome.skipped
 
