@@ -45,13 +45,17 @@ class KidnapTest:
     since: int  # BEV stamp of the first frame of the monitor's inconsistent run
     tracker: HypothesisTracker  # its own filter bank
     rounds_left: int
+    contradiction: float  # the most any recent frame contradicted the BEV when the test started
 
     @classmethod
-    def start(cls, bev_stamp: int, settings: Settings) -> "KidnapTest":
-        """The test of a run of monitor_frames inconsistent frames ending at bev_stamp."""
+    def start(cls, bev_stamp: int, settings: Settings, contradiction: float) -> "KidnapTest":
+        """The test of a run of monitor_frames inconsistent frames ending at bev_stamp;
+        contradiction: the most a frame of the last localizer.local_frames contradicted
+        what older frames saw (RollingBEV.last_contradiction)."""
         bank = HypothesisTracker(settings.tracking)
         bank.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
-        return cls(bev_stamp - settings.localizer.monitor_frames + 1, bank, settings.tracking.confirm_rounds_after_loss + 1)
+        return cls(bev_stamp - settings.localizer.monitor_frames + 1, bank, settings.tracking.confirm_rounds_after_loss + 1,
+                   contradiction)
 
     def job(self, index: int, snapshot, old: Mode | None) -> RoundJob:
         """The test's round started at frame index: a global search on `snapshot` (the BEV

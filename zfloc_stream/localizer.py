@@ -63,10 +63,12 @@ class Localizer:
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
+        self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
         self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
-        self._adopted_at = -1  # frame whose kidnap round was adopted last
+        self._adopted_at = -1
+  # frame whose kidnap round was adopted last
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -78,6 +80,7 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
+            self._recent_contradiction.append(self.bev.last_contradiction)
             # only a tracked alignment is watched, as reported (the local refinement's)
             tracked = self.tracker.best if self.tracker.status == "tracking" else None
             if self.monitor.wants_global_search(None if tracked is None else tracked.id,
@@ -188,7 +191,7 @@ class Localizer:
         """The monitor saw the tracked place stop explaining the frames: test whether the
         sensor was carried off (kidnap_test.py)."""
         if self._kidnap is None:
-            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings)
+            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0))
             self.kidnap_tests += 1
 
     def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
@@ -200,7 +203,8 @@ class Localizer:
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
         old_alignment = None if old is None else self.local.alignment_of_mode(old)
-        verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
+        carried = test.contradiction >= self.settings.localizer.kidnap_contradiction
+        verdict = test.feed(scheduled, outcome, lambda found: old is None or carried and better_place(
             found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2]))
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None

@@ -90,6 +90,7 @@ class RollingBEV:
         self.frames_fused = 0
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
+        self.last_contradiction = 0.0  # of the last fused frame (_contradiction)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
@@ -348,6 +349,24 @@ class RollingBEV:
         angles = yaw + (np.arange(len(free)) + b0 + 0.5) * width
         return angles, free
 
+    def _contradiction(self, wall_hits: np.ndarray) -> float:
+        """Of the frame's wall hits that land on cells older frames saw, the share landing
+        where they saw open space, no occupied cell within localizer.monitor_distance: a
+        sensor carried off sees walls cut through what it saw before, one walking on does
+        not (0 with fewer than localizer.monitor_min_points such hits)."""
+        g = self.grid
+        row, col = g.cells(wall_hits)
+        known = g.seen[row, col] > 0
+        if known.sum() < self.settings.localizer.monitor_min_points:
+            return 0.0
+        row, col = row[known], col[known]
+        reach = max(1, int(round(self.settings.localizer.monitor_distance / g.res)))
+        near = np.zeros(len(row), dtype=bool)
+        for dr in range(-reach, reach + 1):
+            for dc in range(-reach, reach + 1):
+                near |= g.logodds[np.clip(row + dr, 0, g.n - 1), np.clip(col + dc, 0, g.n - 1)] > self.settings.bev.occupied_threshold
+        return float(((g.logodds[row, col] < self.settings.bev.free_threshold) & ~near).mean())
+
     # ------------------------------------------------------------------------------
     # the shared update
     def _fuse(
@@ -362,6 +381,7 @@ class RollingBEV:
         g = self.grid
         self.last_wall_hits = wall_hits  # the localizer checks each frame against the tracked alignment
         g.centre_on(centre, self._slack)
+        self.last_contradiction = self._contradiction(wall_hits)
         g.stamp += 1
         hit_flat = g.unique_flat(hits)
         # free polygon, drawn on a crop around it only

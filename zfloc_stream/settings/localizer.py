@@ -29,6 +29,14 @@ class LocalizerSettings(Section):
     # over its last monitor_reference_frames consistent frames) is inconsistent too
     monitor_relative_share: float = Field(0.5, ge=0, le=1)
     monitor_reference_frames: int = Field(20, ge=1, le=10_000)
+    # the kidnap test adopts another place only if a frame of the last local_frames before
+    # it started cut through what older frames saw: this share of its wall hits landed where
+    # they saw open space (RollingBEV._contradiction). Carried off, the first frame there
+    # puts 0.5-0.99 of its hits in the old place's open space (the Carmen laser logs spliced),
+    # 0.24 on the built-in apartment's camera; walking into a part the map lacks, under
+    # 0.01 (the built-in office with walls erased), so a place elsewhere that explains
+    # those frames better is not adopted there
+    kidnap_contradiction: float = Field(0.15, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,
