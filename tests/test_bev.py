@@ -340,3 +340,19 @@ def test_forget_before_and_a_snapshot_since_keep_what_later_frames_touched():
     for name in ("wall_points", "free", "clearance"):
         assert np.array_equal(getattr(forgotten, name), getattr(since, name))
     assert bev.plane_pose(laser(11.0, 3.0, 0.0, box=room_b, t=10)) == pose
+
+
+def test_a_frame_whose_walls_cut_through_what_older_frames_saw_open_contradicts_them():
+    """last_contradiction: the share of a frame's wall hits on cells older frames saw open,
+    no occupied cell within localizer.monitor_distance. The same room seen again: 0; a
+    smaller room at the same odometry pose (carried off): its walls stand in the open space
+    of the first, all of them contradict it (the kidnap test's evidence)."""
+    room, smaller = (0.0, 0.0, 8.0, 6.0), (2.0, 1.5, 6.0, 4.5)
+    bev = RollingBEV(Settings())
+    for i in range(5):
+        bev.add(laser(4.0, 3.0, 0.2 * i, box=room, t=i))
+    assert bev.last_contradiction == 0.0  # (the first frame: nothing older to contradict)
+    bev.add(laser(4.0, 3.0, 0.1, box=room, t=5))
+    assert bev.last_contradiction == 0.0
+    bev.add(laser(4.0, 3.0, 0.1, box=smaller, t=6))
+    assert bev.last_contradiction > 0.9

@@ -151,6 +151,31 @@ def test_a_sensor_carried_off_is_found_again_by_the_kidnap_test():
     assert (err[-10:] < 1.0).all()
 
 
+def test_kidnap_contradiction_is_the_evidence_a_kidnap_needs():
+    """The carried-off run above is adopted when localizer.kidnap_contradiction is at most
+    what its frames contradicted the BEV, and not just above it."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=260)
+    frames, k0, later = list(seq), 50, 150
+    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
+    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + 30]]
+
+    def run(threshold=None):
+        settings = Settings() if threshold is None else Settings(localizer={"kidnap_contradiction": threshold})
+        seen = []
+        with Localizer(scene.floorplan, settings) as loc:
+            for f in spliced:
+                loc.push(f)
+                if loc.kidnap_test is not None:
+                    seen.append(loc.kidnap_test.contradiction)
+            return seen, loc.kidnaps_found
+
+    seen, found = run()
+    assert found == 1 and seen
+    assert run(seen[0])[1] == 1
+    assert run(float(np.nextafter(seen[0], 1.0)))[1] == 0
+
+
 def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
     scene = build_scene("rooms", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=12)

@@ -120,6 +120,11 @@ class Localizer:
         timings["fusion"] = time.perf_counter() - t0
         return plane_pose, None
 
+    @property
+    def kidnap_test(self) -> KidnapTest | None:
+        """The running kidnap test (kidnap_test.py), None when none runs."""
+        return self._kidnap
+
     def close(self) -> None:
         """Stop the round worker (round_scheduler.RoundScheduler.close)."""
         self.rounds.close()

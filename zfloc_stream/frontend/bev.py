@@ -360,12 +360,16 @@ class RollingBEV:
         if known.sum() < self.settings.localizer.monitor_min_points:
             return 0.0
         row, col = row[known], col[known]
+        free = g.logodds[row, col] < self.settings.bev.free_threshold
+        if not free.any():
+            return 0.0
+        # only the hits on free cells need their neighbourhood: one gather for all of them
         reach = max(1, int(round(self.settings.localizer.monitor_distance / g.res)))
-        near = np.zeros(len(row), dtype=bool)
-        for dr in range(-reach, reach + 1):
-            for dc in range(-reach, reach + 1):
-                near |= g.logodds[np.clip(row + dr, 0, g.n - 1), np.clip(col + dc, 0, g.n - 1)] > self.settings.bev.occupied_threshold
-        return float(((g.logodds[row, col] < self.settings.bev.free_threshold) & ~near).mean())
+        offsets = np.arange(-reach, reach + 1)
+        rows = np.clip(row[free, None, None] + offsets[None, :, None], 0, g.n - 1)
+        cols = np.clip(col[free, None, None] + offsets[None, None, :], 0, g.n - 1)
+        near = (g.logodds[rows, cols] > self.settings.bev.occupied_threshold).any(axis=(1, 2))
+        return float((~near).sum() / len(row))
 
     # ------------------------------------------------------------------------------
     # the shared update
