@@ -12,7 +12,10 @@ frames from the run's start on saw alone (the old place among their warm starts,
 it competes on the same evidence). It must earn `tracking` there by the tracker's own
 rules, as after a loss (confirm_rounds_after_loss hits, dominance, no close rival), and
 then be a better place (better_place): elsewhere than the tracked one, and explaining the
-recent frames as the monitor wants them explained, better than the old place. Then the
+recent frames as the monitor wants them explained, better than the old place. And the
+sensor must have seen a discontinuity before the test: a recent frame's walls cut through
+what older frames saw as open space (localizer.kidnap_contradiction), which a sensor
+carried off sees and one walking into a part the map lacks does not. Then the
 localizer adopts the bank and the BEV forgets what only older frames saw. If not within
 confirm_rounds_after_loss + 1 rounds, the test ends and nothing is lost: the BEV and the
 tracker are as they were, and the next round searches globally on the whole BEV. No frame
@@ -46,6 +49,7 @@ class KidnapTest:
     tracker: HypothesisTracker  # its own filter bank
     rounds_left: int
     contradiction: float  # the most any recent frame contradicted the BEV when the test started
+    discontinuous: bool  # that is at least localizer.kidnap_contradiction: only then can it adopt
 
     @classmethod
     def start(cls, bev_stamp: int, settings: Settings, contradiction: float) -> "KidnapTest":
@@ -55,7 +59,7 @@ class KidnapTest:
         bank = HypothesisTracker(settings.tracking)
         bank.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
         return cls(bev_stamp - settings.localizer.monitor_frames + 1, bank, settings.tracking.confirm_rounds_after_loss + 1,
-                   contradiction)
+                   contradiction, contradiction >= settings.localizer.kidnap_contradiction)
 
     def job(self, index: int, snapshot, old: Mode | None) -> RoundJob:
         """The test's round started at frame index: a global search on `snapshot` (the BEV
@@ -65,11 +69,13 @@ class KidnapTest:
 
     def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome, better: Callable[[Mode], bool]) -> Verdict:
         """One of the test's rounds landed: update the bank; better(found) says whether its
-        tracked mode is a better place than the old one (better_place)."""
+        tracked mode is a better place than the old one (better_place). Only a test that
+        started on a discontinuity can adopt: a sensor walking on never sees its walls cut
+        through the open space it saw a moment ago, one carried off does."""
         self.rounds_left -= 1
         if outcome.result is not None:
             self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
-        if self.tracker.status == "tracking" and better(self.tracker.best):
+        if self.tracker.status == "tracking" and self.discontinuous and better(self.tracker.best):
             return Verdict.CARRIED_OFF
         if self.rounds_left <= 0 or self.tracker.status == "tracking":
             return Verdict.NOT_CARRIED_OFF  # nothing else earned tracking (or the old place did)

@@ -208,8 +208,7 @@ class Localizer:
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
         old_alignment = None if old is None else self.local.alignment_of_mode(old)
-        carried = test.contradiction >= self.settings.localizer.kidnap_contradiction
-        verdict = test.feed(scheduled, outcome, lambda found: old is None or carried and better_place(
+        verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
             found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2]))
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
