@@ -316,3 +316,43 @@ def test_observation_of_fused_scans_is_repeatable():
     b = bev.snapshot(copy=False).observation(make_rng(0, "obs"))
     assert len(a.wall_points) > 300 and len(a.lines) > 0
     _assert_same_observation(a, b)
+
+
+def test_forget_before_and_a_snapshot_since_keep_what_later_frames_touched():
+    """A kidnap test's round sees only what frames from a stamp on saw (snapshot since), and
+    an adopted kidnap empties the rest (forget_before): room A, seen by frames 1-5 only, is
+    gone from both; room B, seen by frames 6-10, is as it was, and the plane frame stays."""
+    room_a, room_b = (0.0, 0.0, 6.0, 6.0), (8.0, 0.0, 14.0, 6.0)
+    bev = RollingBEV(load_settings(overrides=["bev.memory_frames=0"]))
+    for i in range(5):
+        bev.add(laser(3.0, 3.0, 0.2 * i, box=room_a, t=i))
+    for i in range(5, 10):
+        bev.add(laser(11.0, 3.0, 0.2 * i, box=room_b, t=i))
+    assert bev.stamp == 10
+    full = bev.observation(make_rng(0, "obs"))
+    since = bev.snapshot(copy=True, since=6).observation(make_rng(0, "obs"))
+    assert (full.wall_points[:, 0] < 7).any() and not (since.wall_points[:, 0] < 7).any()
+    assert (since.wall_points[:, 0] > 7.9).sum() == (full.wall_points[:, 0] > 7.9).sum()
+    assert not since.free_at(np.array([[3.0, 3.0]])).any() and since.free_at(np.array([[11.0, 3.0]])).all()
+    pose = bev.plane_pose(laser(11.0, 3.0, 0.0, box=room_b, t=10))
+    bev.forget_before(6)
+    forgotten = bev.observation(make_rng(0, "obs"))
+    for name in ("wall_points", "free", "clearance"):
+        assert np.array_equal(getattr(forgotten, name), getattr(since, name))
+    assert bev.plane_pose(laser(11.0, 3.0, 0.0, box=room_b, t=10)) == pose
+
+
+def test_a_frame_whose_walls_cut_through_what_older_frames_saw_open_contradicts_them():
+    """last_contradiction: the share of a frame's wall hits on cells older frames saw open,
+    no occupied cell within localizer.monitor_distance. The same room seen again: 0; a
+    smaller room at the same odometry pose (carried off): its walls stand in the open space
+    of the first, all of them contradict it (the kidnap test's evidence)."""
+    room, smaller = (0.0, 0.0, 8.0, 6.0), (2.0, 1.5, 6.0, 4.5)
+    bev = RollingBEV(Settings())
+    for i in range(5):
+        bev.add(laser(4.0, 3.0, 0.2 * i, box=room, t=i))
+    assert bev.last_contradiction == 0.0  # (the first frame: nothing older to contradict)
+    bev.add(laser(4.0, 3.0, 0.1, box=room, t=5))
+    assert bev.last_contradiction == 0.0
+    bev.add(laser(4.0, 3.0, 0.1, box=smaller, t=6))
+    assert bev.last_contradiction > 0.9

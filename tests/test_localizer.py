@@ -125,6 +125,57 @@ def test_kidnapping_is_detected_and_recovered_within_30_frames(pipeline, lag):
     assert (err[-10:] < 1.0).all()
 
 
+def test_a_sensor_carried_off_is_found_again_by_the_kidnap_test():
+    """Carried to another place while its odometry stood still (the frames of a later
+    stretch, re-anchored): the tracked place stops explaining the frames, the kidnap test's
+    own bank tracks the new place on what the frames since saw, and the localizer adopts
+    it. Only the frames before the monitor's run is complete may still say `tracking`."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=260)
+    frames, k0, later = list(seq), 50, 150
+    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
+    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + 50]]
+    truth = list(seq.poses[:k0]) + list(seq.poses[later:later + 50])
+    assert np.linalg.norm(truth[k0][:2] - truth[k0 - 1][:2]) > 4.0  # really carried off
+    settings = Settings()
+    with Localizer(scene.floorplan, settings) as loc:
+        est = [loc.push(f) for f in spliced]
+        tests, found = loc.kidnap_tests, loc.kidnaps_found
+    err = np.array([np.inf if e.pose is None else np.linalg.norm(e.pose[:2] - p[:2]) for e, p in zip(est, truth)])
+    assert est[k0 - 1].status == "tracking" and err[k0 - 1] < 1.0
+    assert tests >= 1 and found == 1
+    recovered = next(k for k in range(k0, len(est)) if est[k].status == "tracking" and err[k] < 1.0)
+    assert recovered - k0 <= 30, [e.status for e in est[k0:]]
+    off = [k for k, (e, v) in enumerate(zip(est, err)) if e.status == "tracking" and v >= 1.0]
+    assert all(k0 <= k < k0 + settings.localizer.monitor_frames for k in off), off
+    assert (err[-10:] < 1.0).all()
+
+
+def test_kidnap_contradiction_is_the_evidence_a_kidnap_needs():
+    """The carried-off run above is adopted when localizer.kidnap_contradiction is at most
+    what its frames contradicted the BEV, and not just above it."""
+    scene = build_scene("apartment", seed=2)
+    seq = simulate(scene, SimSettings(), seed=2, n_frames=260)
+    frames, k0, later = list(seq), 50, 150
+    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
+    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + 30]]
+
+    def run(threshold=None):
+        settings = Settings() if threshold is None else Settings(localizer={"kidnap_contradiction": threshold})
+        seen = []
+        with Localizer(scene.floorplan, settings) as loc:
+            for f in spliced:
+                loc.push(f)
+                if loc.kidnap_test is not None:
+                    seen.append(loc.kidnap_test.contradiction)
+            return seen, loc.kidnaps_found
+
+    seen, found = run()
+    assert found == 1 and seen
+    assert run(seen[0])[1] == 1
+    assert run(float(np.nextafter(seen[0], 1.0)))[1] == 0
+
+
 def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
     scene = build_scene("rooms", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=12)

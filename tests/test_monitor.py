@@ -7,7 +7,7 @@ import pytest
 from zfloc_stream.config import Settings
 from zfloc_stream.estimation.local_refinement import explained_share
 from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.monitor import ConsistencyMonitor
+from zfloc_stream.monitor import REFERENCE_MIN_FRAMES, ConsistencyMonitor
 from zfloc_stream.sim2 import Sim2
 
 RES = 0.1  # m per cell
@@ -69,20 +69,20 @@ def test_monitor_max_points_subsamples_evenly(plan):
 def test_monitor_frames_inconsistent_frames_in_a_row_ask_for_a_global_search(plan):
     good, bad = at_depth(plan, 1, 40), at_depth(plan, 20, 40)
     m = monitor(plan, monitor_frames=3, monitor_distance=0.15)
-    asks = [m.wants_global_search(True, IDENTITY, hits) for hits in (bad, bad, good, bad, bad, bad, bad)]
+    asks = [m.wants_global_search(0, IDENTITY, hits) for hits in (bad, bad, good, bad, bad, bad, bad)]
     # a consistent frame restarts the run; the third in a row asks, and the run restarts
     assert asks == [False, False, False, False, False, True, False]
     m = monitor(plan, monitor_frames=4, monitor_distance=0.15)
-    assert not any(m.wants_global_search(True, IDENTITY, bad) for _ in range(3))
-    assert m.wants_global_search(True, IDENTITY, bad)
+    assert not any(m.wants_global_search(0, IDENTITY, bad) for _ in range(3))
+    assert m.wants_global_search(0, IDENTITY, bad)
 
 
 def test_only_a_tracked_alignment_is_judged(plan):
     bad = at_depth(plan, 20, 40)
     m = monitor(plan, monitor_frames=1, monitor_distance=0.15)
-    assert not m.wants_global_search(False, None, bad)  # initializing, lost, ambiguous: nothing to check
+    assert not m.wants_global_search(None, None, bad)  # initializing, lost, ambiguous: nothing to check
     assert m.inconsistent_frames == 0
-    assert m.wants_global_search(True, IDENTITY, bad)
+    assert m.wants_global_search(0, IDENTITY, bad)
 
 
 def test_the_same_frame_and_alignment_are_judged_once(plan, monkeypatch):
@@ -96,3 +96,39 @@ def test_the_same_frame_and_alignment_are_judged_once(plan, monkeypatch):
     assert len(calls) == 1
     assert m.frame_consistent(IDENTITY, hits.copy()) is True  # another frame: judged again
     assert len(calls) == 2
+
+
+def mixed(plan, explained: int, total: int = 40) -> np.ndarray:
+    """total hits of which `explained` lie one cell from a wall, the rest far from every wall."""
+    return np.concatenate([at_depth(plan, 1, explained), at_depth(plan, 20, total - explained)])
+
+
+def test_monitor_relative_share_is_the_drop_from_the_mode_usual_share(plan):
+    """A frame explaining less than monitor_relative_share of the tracked mode's usual share
+    is inconsistent, though well above monitor_min_consistency (a wrong place on a dense map)."""
+    base = dict(monitor_distance=0.15, monitor_min_consistency=0.05, monitor_min_points=10)
+    for ratio, expected in ((0.5, True), (np.nextafter(0.5, 1.0), False)):
+        m = monitor(plan, monitor_relative_share=ratio, **base)
+        for _ in range(6):  # the mode's frames: every hit explained (usual share 1.0)
+            assert not m.wants_global_search(7, IDENTITY, mixed(plan, 40))
+        half = mixed(plan, 20)  # half of the hits: exactly 0.5 of the usual share
+        assert m.frame_consistent(IDENTITY, half, mode_id=7) is expected
+        assert m.frame_consistent(IDENTITY, half) is True  # no mode named: the absolute test alone
+        assert m.frame_consistent(IDENTITY, half, mode_id=8) is True  # another mode has no usual share yet
+
+
+def test_monitor_reference_frames_is_how_far_back_the_usual_share_looks(plan):
+    base = dict(monitor_distance=0.15, monitor_min_consistency=0.05, monitor_min_points=10, monitor_relative_share=0.5)
+    for frames, usual in ((5, 1.0), (10, 0.75)):
+        m = monitor(plan, monitor_reference_frames=frames, **base)
+        for explained in [20] * 5 + [40] * 5:  # five frames at 0.5, then five at 1.0
+            m.wants_global_search(3, IDENTITY, mixed(plan, explained))
+        assert m.usual_share(3) == usual
+    m = monitor(plan, **base)
+    for _ in range(REFERENCE_MIN_FRAMES - 1):
+        m.wants_global_search(3, IDENTITY, mixed(plan, 40))
+    assert m.usual_share(3) is None  # too few frames for a usual share
+    m.wants_global_search(3, IDENTITY, mixed(plan, 40))
+    assert m.usual_share(3) == 1.0
+    m.wants_global_search(4, IDENTITY, mixed(plan, 40))  # another mode tracked: its own usual share
+    assert m.usual_share(3) is None and m.usual_share(4) is None

@@ -12,9 +12,10 @@ current best alignment applied to the frame's odometry-plane pose, so every fram
 
 Where and when a round runs (inline, on a worker, joined at fixed frames):
 round_scheduler.py. The consistency monitor (monitor.py) watches each fused frame against
-the tracked alignment and asks for a global search when it stops explaining them; the
-local refinement (estimation/local_refinement.py) follows the tracked mode's drift on the
-recent frames' wall hits.
+the tracked alignment; when it stops explaining them, a kidnap test (kidnap_test.py) asks
+whether the sensor is at another place, on what those frames saw alone. The local
+refinement (estimation/local_refinement.py) follows the tracked mode's drift on the recent
+frames' wall hits.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from .estimation.scoring import scoring_kernels
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import RollingBEV
+from .kidnap_test import KidnapTest, Verdict, better_place
 from .monitor import ConsistencyMonitor
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
@@ -61,6 +63,12 @@ class Localizer:
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
+        self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
+        self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
+        self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
+        self.kidnaps_found = 0  # of them, adopted: another place was tracked
+        self._adopted_at = -1
+  # frame whose kidnap round was adopted last
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -72,14 +80,20 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
-            tracking = self.tracker.status == "tracking"  # only a tracked alignment is watched
-            if self.monitor.wants_global_search(tracking, self.tracker.best.alignment if tracking else None, self.bev.last_wall_hits):
-                self.rounds.request_global_search()
+            self._recent_contradiction.append(self.bev.last_contradiction)
+            # only a tracked alignment is watched, as reported (the local refinement's)
+            tracked = self.tracker.best if self.tracker.status == "tracking" else None
+            if self.monitor.wants_global_search(None if tracked is None else tracked.id,
+                                                None if tracked is None else self.local.alignment_of_mode(tracked),
+                                                self.bev.last_wall_hits):
+                self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         if plane_pose is not None and self.frames_fused % lc.every_k_frames == 0:
-            self.rounds.start(self.rounds.mode(has_pose=self.tracker.best is not None),
-                              lambda copy: self._round_job(index, copy), plane_pose, timings)
+            mode = self.rounds.mode(has_pose=self.tracker.best is not None)
+            self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
+            if self._kidnap is not None:  # the tracker goes on meanwhile: nothing is lost if the test fails
+                self.rounds.start(mode, lambda copy: self._kidnap_job(index, copy), plane_pose, timings)
             reasons += [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
             self._refine_locally(timings)  # follow the drift between rounds too
@@ -105,6 +119,11 @@ class Localizer:
         self.frames_fused += 1
         timings["fusion"] = time.perf_counter() - t0
         return plane_pose, None
+
+    @property
+    def kidnap_test(self) -> KidnapTest | None:
+        """The running kidnap test (kidnap_test.py), None when none runs."""
+        return self._kidnap
 
     def close(self) -> None:
         """Stop the round worker (round_scheduler.RoundScheduler.close)."""
@@ -142,11 +161,23 @@ class Localizer:
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted
         return RoundJob(index, snapshot, self.tracker.warm_start(), tracked)
 
+    def _kidnap_job(self, index: int, copy: bool) -> RoundJob:
+        """The kidnap test's round: a global search on what the frames since its run saw."""
+        try:
+            snapshot = self.bev.snapshot(copy=copy, since=self._kidnap.since)
+        except ZflocError:
+            snapshot = None
+        return self._kidnap.job(index, snapshot, self.tracker.best)
+
     def _apply(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A round lands: the tracker updates as of the frame the round started at, then the
         local refinement follows the tracked mode. Returns why the round did not run (None
         when it did)."""
         self.last_round = outcome
+        if scheduled.job.since:
+            return self._kidnap_round(scheduled, outcome, timings)
+        if scheduled.job.index < self._adopted_at:
+            return "round started before a kidnap was found: dropped"
         if outcome.observation is None:
             return outcome.skipped
         self.last_observation = outcome.observation
@@ -159,6 +190,41 @@ class Localizer:
         outcome.cpu_timings["tracking"] = time.thread_time() - c0
         self._refine_locally(timings, outcome)
         return None
+
+    # ------------------------------------------------------------------------------
+    def _start_kidnap_test(self) -> None:
+        """The monitor saw the tracked place stop explaining the frames: test whether the
+        sensor was carried off (kidnap_test.py)."""
+        if self._kidnap is None:
+            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0))
+            self.kidnap_tests += 1
+
+    def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
+        """A kidnap test's round landed: adopt its bank (the BEV forgets what only older
+        frames saw), go on, or end the test. Returns why the round did not count."""
+        test, old = self._kidnap, self.tracker.best
+        if test is None or test.since != scheduled.job.since:
+            return "kidnap test over: its last round is dropped"
+        if outcome.result is not None:
+            self.last_observation, self.last_result = outcome.observation, outcome.result
+        old_alignment = None if old is None else self.local.alignment_of_mode(old)
+        verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
+            found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2]))
+        if verdict is Verdict.CARRIED_OFF:
+            self.tracker, self._kidnap = test.tracker, None
+            self.kidnaps_found += 1
+            self._adopted_at = scheduled.job.index  # rounds started before this worked for the old place
+            self.bev.forget_before(test.since)
+            self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
+            self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+            self._refine_locally(timings, outcome)
+            return None
+        if verdict is Verdict.NOT_CARRIED_OFF:
+            # the test's global searches found no better place: the frames saw what the map
+            # lacks, and the tracker, which went on meanwhile, keeps its modes
+            self._kidnap = None
+            return "kidnap test ended: no other place earned tracking"
+        return outcome.skipped
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()
@@ -180,7 +246,9 @@ class Localizer:
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
-        consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits)
+        consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits, best.id)
+        if self._kidnap is not None and alignment is not None:
+            consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
         status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
         alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose

@@ -11,9 +11,18 @@ full global search (the scheduler keeps the request until a round started after 
 The same per-frame judgement withholds `tracking` from a single frame the alignment does
 not explain (tracking.assess_frame): the monitor and the estimate ask about the same frame
 and alignment, so the share is computed once.
+
+What a right alignment explains depends on the map: a plan of walls only explains a
+frame's wall hits but not the furniture, a dense map made from other passes explains
+nearly all of them, and a wrong alignment on such a map still explains 10-60% (the Carmen
+self-maps after a kidnap). So a frame is also judged against the tracked mode's own usual
+share, the median over its last monitor_reference_frames consistent frames: below
+monitor_relative_share of it, the frame is inconsistent too.
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 
@@ -23,35 +32,66 @@ from .settings.localizer import LocalizerSettings
 from .sim2 import Sim2
 
 
+# a usual share needs this many consistent frames of the mode: a median of fewer is one
+# frame's accident
+REFERENCE_MIN_FRAMES = 5
+
+
 class ConsistencyMonitor:
     def __init__(self, floorplan: Floorplan, settings: LocalizerSettings):
         self.floorplan = floorplan
         self.settings = settings
         self.inconsistent_frames = 0  # consecutive judged frames the tracked alignment did not explain
         self._memo: tuple | None = None  # (alignment, hits, share) of the last judgement
+        self._usual: deque[float] = deque(maxlen=settings.monitor_reference_frames)  # shares of the tracked mode's consistent frames
+        self._usual_mode: int | None = None  # the mode they belong to
 
-    def frame_consistent(self, alignment: Sim2, hits: np.ndarray) -> bool | None:
-        """Does the alignment explain the frame's wall hits (plane frame)? None: too few
-        hits to judge."""
+    def share(self, alignment: Sim2, hits: np.ndarray) -> float | None:
+        """The share of the frame's wall hits (plane frame) the alignment explains; None:
+        too few hits to judge."""
         cfg = self.settings
         if len(hits) < cfg.monitor_min_points:
             return None
         memo = self._memo
-        if memo is not None and memo[0] is alignment and memo[1] is hits:
-            share = memo[2]
-        else:
+        if memo is None or memo[0] is not alignment or memo[1] is not hits:
             share = explained_share(self.floorplan, alignment, hits[:: max(1, len(hits) // cfg.monitor_max_points)],
                                     cfg.monitor_distance)
-            self._memo = (alignment, hits, share)
-        return bool(share >= cfg.monitor_min_consistency)
+            self._memo = memo = (alignment, hits, share)
+        return memo[2]
 
-    def wants_global_search(self, tracking: bool, alignment: Sim2 | None, hits: np.ndarray) -> bool:
-        """Judge one fused frame against the tracked alignment (tracking: the tracker's
-        status is `tracking`); True when the run of inconsistent frames reaches
-        monitor_frames (the run then starts again)."""
-        consistent = self.frame_consistent(alignment, hits) if tracking else None
+    def usual_share(self, mode_id: int | None) -> float | None:
+        """The mode's usual share (median over its recent consistent frames); None while it
+        has fewer than REFERENCE_MIN_FRAMES of them."""
+        if mode_id is None or mode_id != self._usual_mode or len(self._usual) < REFERENCE_MIN_FRAMES:
+            return None
+        return float(np.median(self._usual))
+
+    def frame_consistent(self, alignment: Sim2, hits: np.ndarray, mode_id: int | None = None) -> bool | None:
+        """Does the alignment (of the mode mode_id, if known) explain the frame's wall hits
+        (plane frame)? None: too few hits to judge."""
+        share = self.share(alignment, hits)
+        if share is None:
+            return None
+        return self.explains(share, self.usual_share(mode_id))
+
+    def explains(self, share: float, usual: float | None) -> bool:
+        """The monitor's test: a share at least monitor_min_consistency and at least
+        monitor_relative_share of the usual share (when one is known)."""
+        relative = usual is None or share >= self.settings.monitor_relative_share * usual
+        return bool(share >= self.settings.monitor_min_consistency and relative)
+
+    def wants_global_search(self, tracked_mode_id: int | None, alignment: Sim2 | None, hits: np.ndarray) -> bool:
+        """Judge one fused frame against the tracked mode's alignment (None: nothing is
+        tracked); True when the run of inconsistent frames reaches monitor_frames (the run
+        then starts again). A consistent frame adds to the mode's usual share."""
+        if tracked_mode_id != self._usual_mode:
+            self._usual.clear()
+            self._usual_mode = tracked_mode_id
+        consistent = None if tracked_mode_id is None else self.frame_consistent(alignment, hits, tracked_mode_id)
         if consistent is None:
             return False
+        if consistent:
+            self._usual.append(self.share(alignment, hits))
         self.inconsistent_frames = 0 if consistent else self.inconsistent_frames + 1
         if self.inconsistent_frames >= self.settings.monitor_frames:
             self.inconsistent_frames = 0

@@ -50,6 +50,7 @@ class RoundJob:
     snapshot: BevSnapshot | None  # None: nothing fused into the grid yet
     warm_start: list[Sim2]
     tracked: bool  # one mode confidently tracked and no global search asked for
+    since: int = 0  # a kidnap test: the snapshot holds only what frames from this BEV stamp on saw (0: not a test)
 
 
 @dataclass

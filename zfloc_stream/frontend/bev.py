@@ -90,6 +90,7 @@ class RollingBEV:
         self.frames_fused = 0
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
+        self.last_contradiction = 0.0  # of the last fused frame (_contradiction)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
@@ -133,6 +134,12 @@ class RollingBEV:
         self.last_wall_hits = np.zeros((0, 2))
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
 
+    def forget_before(self, stamp: int) -> None:
+        """Keep only what frames from this stamp on touched (the sensor was carried off:
+        the place older frames saw is not where it is now); unlike clear_map, the plane
+        frame (scan matching's correction) stays, so alignments to the floorplan stay valid."""
+        self.grid.forget_before(stamp)
+
     @property
     def pending_frames(self) -> int:
         return len(self._pending)
@@ -148,17 +155,23 @@ class RollingBEV:
     def observation(self, rng: np.random.Generator) -> BevObservation:
         return self.snapshot(copy=False).observation(rng)
 
-    def snapshot(self, copy: bool = True) -> "BevSnapshot":
+    @property
+    def stamp(self) -> int:
+        """Frames fused into the grid so far (the stamp of the latest)."""
+        return self.grid.stamp
+
+    def snapshot(self, copy: bool = True, since: int = 0) -> "BevSnapshot":
         """What observation() reads, frozen: a pipelined round extracts its observation on a
         worker while this BEV keeps fusing frames (copy=True copies the grid, ~3 MB at the
-        defaults, well under a millisecond)."""
+        defaults, well under a millisecond). since: only what frames from this stamp on
+        touched."""
         g = self.grid
         if g.ix0 is None:
             raise InputError("BEV is empty: no frame fused yet")
         arrays = (g.logodds, g.wall, g.hits, g.seen)
         if copy:
             arrays = tuple(a.copy() for a in arrays)
-        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings, g.stamp)
+        return BevSnapshot(*arrays, g.ix0, g.iy0, self.trajectory, self.settings, g.stamp, since)
 
     # ------------------------------------------------------------------------------
     # lasers
@@ -336,6 +349,28 @@ class RollingBEV:
         angles = yaw + (np.arange(len(free)) + b0 + 0.5) * width
         return angles, free
 
+    def _contradiction(self, wall_hits: np.ndarray) -> float:
+        """Of the frame's wall hits that land on cells older frames saw, the share landing
+        where they saw open space, no occupied cell within localizer.monitor_distance: a
+        sensor carried off sees walls cut through what it saw before, one walking on does
+        not (0 with fewer than localizer.monitor_min_points such hits)."""
+        g = self.grid
+        row, col = g.cells(wall_hits)
+        known = g.seen[row, col] > 0
+        if known.sum() < self.settings.localizer.monitor_min_points:
+            return 0.0
+        row, col = row[known], col[known]
+        free = g.logodds[row, col] < self.settings.bev.free_threshold
+        if not free.any():
+            return 0.0
+        # only the hits on free cells need their neighbourhood: one gather for all of them
+        reach = max(1, int(round(self.settings.localizer.monitor_distance / g.res)))
+        offsets = np.arange(-reach, reach + 1)
+        rows = np.clip(row[free, None, None] + offsets[None, :, None], 0, g.n - 1)
+        cols = np.clip(col[free, None, None] + offsets[None, None, :], 0, g.n - 1)
+        near = (g.logodds[rows, cols] > self.settings.bev.occupied_threshold).any(axis=(1, 2))
+        return float((~near).sum() / len(row))
+
     # ------------------------------------------------------------------------------
     # the shared update
     def _fuse(
@@ -350,6 +385,7 @@ class RollingBEV:
         g = self.grid
         self.last_wall_hits = wall_hits  # the localizer checks each frame against the tracked alignment
         g.centre_on(centre, self._slack)
+        self.last_contradiction = self._contradiction(wall_hits)
         g.stamp += 1
         hit_flat = g.unique_flat(hits)
         # free polygon, drawn on a crop around it only

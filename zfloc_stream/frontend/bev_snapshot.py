@@ -29,8 +29,10 @@ class BevSnapshot:
     """The grid of a RollingBEV at one frame and how to turn it into a BevObservation.
     Pure: the same snapshot and rng give the same observation on any thread or process."""
 
-    def __init__(self, logodds, wall, hits, seen, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings, stamp: int):
-        self.logodds, self.wall, self.hits, self.seen, self.stamp = logodds, wall, hits, seen, stamp
+    def __init__(self, logodds, wall, hits, seen, ix0: int, iy0: int, trajectory: np.ndarray, settings: Settings, stamp: int,
+                 since: int = 0):
+        """since: only cells a frame with this stamp or a later one touched (0: bev.memory_frames alone decides)."""
+        self.logodds, self.wall, self.hits, self.seen, self.stamp, self.since = logodds, wall, hits, seen, stamp, since
         self.ix0, self.iy0 = ix0, iy0
         self.trajectory = trajectory
         self.settings = settings
@@ -45,8 +47,8 @@ class BevSnapshot:
         b = self.settings.bev
         n = self.logodds.shape[0]
         occupied, free_threshold = np.float32(b.occupied_threshold), np.float32(b.free_threshold)
-        use_recent = bool(b.memory_frames)
-        oldest = self.stamp - b.memory_frames
+        use_recent = bool(b.memory_frames) or self.since > 0
+        oldest = max(self.stamp - b.memory_frames if b.memory_frames else 0, self.since - 1)
         grids = (self.logodds, self.wall, self.hits, self.seen)
         any_wall, r_lo, r_hi, c_lo, c_hi = bev_grids.known_extent(
             *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)

@@ -38,6 +38,13 @@ class ScrollingGrid:
         self.ix0 += dx
         self.iy0 += dy
 
+    def forget_before(self, stamp: int) -> None:
+        """Empty every cell no frame from this stamp on touched (hit or freed): what only
+        older frames saw is gone, as if never seen."""
+        old = self.seen < stamp
+        for a in (self.logodds, self.wall, self.hits, self.seen):
+            a[old] = 0
+
     def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(row, col) of the points inside the grid."""
         col = np.floor(xy[:, 0] / self.res).astype(np.int64) - self.ix0

@@ -15,16 +15,28 @@ class LocalizerSettings(Section):
     min_wall_points: int = Field(100, ge=1, le=10_000_000)  # BEV wall cells needed before the first round
     min_primitives: int = Field(3, ge=1, le=1000)  # lines + circles needed before the first round
     # Per-frame consistency monitor: while tracking, each fused frame's wall points are
-    # checked against the tracked alignment. A run of frames the map does not explain is
-    # a part of the building the floorplan lacks, clutter, or an odometry jump; the
-    # monitor cannot tell them apart on real sensors, so it never drops the track or the
-    # BEV: it makes the next round a full global search, and the tracker decides from
-    # relative evidence (a rival that explains the data better) whether the track is lost.
+    # checked against the tracked alignment. A run of monitor_frames frames the map does
+    # not explain is a part of the building the floorplan lacks, clutter, or another place
+    # (a kidnap, an odometry jump, a wrong mode); the monitor cannot tell them apart, so it
+    # drops neither the track nor the BEV: it starts a kidnap test (kidnap_test.py), whose
+    # own filter bank must find a place that explains those frames better.
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
     monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
     monitor_max_points: int = Field(400, ge=1, le=1_000_000)  # wall points checked per frame (subsampled)
     monitor_frames: int = Field(4, ge=1, le=10_000)  # consecutive inconsistent frames before a global search
+    # a frame explaining less than this fraction of the tracked mode's usual share (the median
+    # over its last monitor_reference_frames consistent frames) is inconsistent too
+    monitor_relative_share: float = Field(0.5, ge=0, le=1)
+    monitor_reference_frames: int = Field(20, ge=1, le=10_000)
+    # the kidnap test adopts another place only if a frame of the last local_frames before
+    # it started cut through what older frames saw: this share of its wall hits landed where
+    # they saw open space (RollingBEV._contradiction). Carried off, the first frame there
+    # puts 0.5-0.99 of its hits in the old place's open space (the Carmen laser logs spliced),
+    # 0.24 on the built-in apartment's camera; walking into a part the map lacks, under
+    # 0.01 (the built-in office with walls erased), so a place elsewhere that explains
+    # those frames better is not adopted there
+    kidnap_contradiction: float = Field(0.15, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,

@@ -1,0 +1,99 @@
+"""The kidnap test: was the sensor carried off, or does it see what the map lacks?
+
+A run of frames the tracked alignment does not explain (monitor.py) is one or the other:
+the sensor sees a room the map leaves out, or clutter; or it is at another place than the
+tracked one (carried off, a slipped wheel, a wrong mode that won a round). Only in the
+second case does the rest of the BEV show another place than the recent frames, so a
+global search on the whole BEV keeps finding the old place: on the Carmen logs spliced at
+far-apart places it took 26-87 frames to recover.
+
+So the hypothesis "carried off" gets its own filter bank, fed by global rounds on what the
+frames from the run's start on saw alone (the old place among their warm starts, so that
+it competes on the same evidence). It must earn `tracking` there by the tracker's own
+rules, as after a loss (confirm_rounds_after_loss hits, dominance, no close rival), and
+then be a better place (better_place): elsewhere than the tracked one, and explaining the
+recent frames as the monitor wants them explained, better than the old place. And the
+sensor must have seen a discontinuity before the test: a recent frame's walls cut through
+what older frames saw as open space (localizer.kidnap_contradiction), which a sensor
+carried off sees and one walking into a part the map lacks does not. Then the
+localizer adopts the bank and the BEV forgets what only older frames saw. If not within
+confirm_rounds_after_loss + 1 rounds, the test ends and nothing is lost: the BEV and the
+tracker are as they were, and the next round searches globally on the whole BEV. No frame
+is `tracking` while a test runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from .config import Settings
+from .monitor import ConsistencyMonitor
+from .round_scheduler import RoundJob, RoundOutcome, ScheduledRound
+from .sim2 import Sim2
+from .tracking import HypothesisTracker, Mode
+
+
+class Verdict(Enum):
+    GOES_ON = "goes on"
+    CARRIED_OFF = "carried off"  # adopt the test's bank
+    NOT_CARRIED_OFF = "not carried off"  # the test ends, nothing changes
+
+
+@dataclass
+class KidnapTest:
+    since: int  # BEV stamp of the first frame of the monitor's inconsistent run
+    tracker: HypothesisTracker  # its own filter bank
+    rounds_left: int
+    contradiction: float  # the most any recent frame contradicted the BEV when the test started
+    discontinuous: bool  # that is at least localizer.kidnap_contradiction: only then can it adopt
+
+    @classmethod
+    def start(cls, bev_stamp: int, settings: Settings, contradiction: float) -> "KidnapTest":
+        """The test of a run of monitor_frames inconsistent frames ending at bev_stamp;
+        contradiction: the most a frame of the last localizer.local_frames contradicted
+        what older frames saw (RollingBEV.last_contradiction)."""
+        bank = HypothesisTracker(settings.tracking)
+        bank.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
+        return cls(bev_stamp - settings.localizer.monitor_frames + 1, bank, settings.tracking.confirm_rounds_after_loss + 1,
+                   contradiction, contradiction >= settings.localizer.kidnap_contradiction)
+
+    def job(self, index: int, snapshot, old: Mode | None) -> RoundJob:
+        """The test's round started at frame index: a global search on `snapshot` (the BEV
+        since self.since), warm-started from its bank and the old place."""
+        warm = self.tracker.warm_start() + ([] if old is None else [old.alignment])
+        return RoundJob(index, snapshot, warm, False, self.since)
+
+    def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome, better: Callable[[Mode], bool]) -> Verdict:
+        """One of the test's rounds landed: update the bank; better(found) says whether its
+        tracked mode is a better place than the old one (better_place). Only a test that
+        started on a discontinuity can adopt: a sensor walking on never sees its walls cut
+        through the open space it saw a moment ago, one carried off does."""
+        self.rounds_left -= 1
+        if outcome.result is not None:
+            self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
+        if self.tracker.status == "tracking" and self.discontinuous and better(self.tracker.best):
+            return Verdict.CARRIED_OFF
+        if self.rounds_left <= 0 or self.tracker.status == "tracking":
+            return Verdict.NOT_CARRIED_OFF  # nothing else earned tracking (or the old place did)
+        return Verdict.GOES_ON
+
+
+def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,
+                 recent_hits: list[np.ndarray], sensor_xy) -> bool:
+    """Is the alignment `found` another place than the tracked `old` (beyond the tracker's
+    pose-jump gate, tracker.pose_jumped), explaining the recent frames' wall hits as the
+    monitor wants them explained (against the old mode's usual share) and more of them
+    than the old place? A short stretch of corridor alone fits many places along it: the
+    test's bank can single one out on thin evidence, which these hits then refute."""
+    if not tracker.pose_jumped(old, found, sensor_xy, old_mode):
+        return False
+    hits = [h for h in recent_hits if len(h)]
+    if not hits:
+        return False
+    hits = np.concatenate(hits)
+    share = monitor.share(found, hits)
+    return share is not None and monitor.explains(share, monitor.usual_share(old_mode.id)) and share > monitor.share(old, hits)
