@@ -2,6 +2,7 @@
 frame i + round_delay, so a worker gives bit for bit what the same round computed inline
 and applied at the same frame ("delayed"); inline mode stays today's behaviour."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import threading
@@ -22,7 +23,7 @@ from zfloc_stream.tools import cli, replay_cli
 
 @pytest.fixture(scope="module")
 def kidnapped_camera():
-    """A camera run whose odometry jumps: the monitor starts a kidnap test mid-stream."""
+    """A camera run whose odometry jumps: the monitor asks for a global search mid-stream."""
     scene = build_scene("apartment", seed=2)
     seq = simulate(scene, SimSettings(width=80, height=60), seed=2, n_frames=60)
     return scene.floorplan, list(Kidnapped(seq, 30))
@@ -40,9 +41,24 @@ def test_pipelined_equals_delayed_inline_bit_for_bit(kidnapped_camera, delay):
     delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
     with Localizer(floorplan, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
         piped = [loc.push(f) for f in frames]
-        assert loc.kidnap_tests >= 1  # the monitor's kidnap test crossed a pending round
+        assert loc.rounds.global_search_requests >= 1  # the monitor's global-search request crossed a pending round
     assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
     assert delayed[-1].pose is not None
+
+
+def test_a_kidnap_test_on_the_worker_gives_the_same_bits():
+    """Carried off (a later stretch spliced in, odometry standing still): the kidnap test's
+    rounds run on the worker beside the tracker's, and the run is the delayed one's, bit for
+    bit, adoption included."""
+    scene = build_scene("apartment", seed=2)
+    frames = list(simulate(scene, SimSettings(), seed=2, n_frames=260))
+    anchor = frames[49].T_odom_cam @ np.linalg.inv(frames[150].T_odom_cam)
+    spliced = frames[:50] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[150:180]]
+    delayed = run_localizer(scene.floorplan, spliced, settings_with("localizer.pipeline=delayed"))
+    with Localizer(scene.floorplan, settings_with("localizer.pipeline=pipelined")) as loc:
+        piped = [loc.push(f) for f in spliced]
+        assert loc.kidnap_tests >= 1 and loc.kidnaps_found == 1
+    assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
 
 
 def test_a_worker_process_gives_the_same_bits(laser):

@@ -58,10 +58,10 @@ def _erase_walls_near(floorplan: Floorplan, points: np.ndarray, radius: float) -
 def test_a_track_through_an_unmapped_part_for_ten_frames_is_not_lost():
     """The plan lacks what 12 frames see: the track carries on through them (poses within
     1 m, the same mode tracked again afterwards); frames whose own hits the plan cannot
-    explain are not vouched for as `tracking` (issue 26), nor are those of the kidnap test
-    they start, but the track is not dropped: the office repeats itself, and a place
-    elsewhere explains those frames better, yet nothing the sensor saw contradicts its own
-    earlier frames, so the test adopts nothing."""
+    explain are not vouched for as `tracking` (issue 26), but the track is not dropped:
+    the office repeats itself, and a place 12.7 m away explains those frames better (0.98
+    of their hits against 0.08), yet nothing the sensor saw contradicts its own earlier
+    frames, so no kidnap test starts (the monitor's run asks for a global search)."""
     scene, seq = laser_run("office", 45, seed=1)
     unmapped = slice(25, 37)  # 12 frames whose surroundings the plan lacks
     plan = _erase_walls_near(scene.floorplan, seq.poses[unmapped, :2], radius=2.5)
@@ -83,7 +83,7 @@ def test_a_track_through_an_unmapped_part_for_ten_frames_is_not_lost():
     # the plan really misses what those scans see (the true alignment explains little)
     assert sum(e < 0.5 for e in explained[unmapped]) >= 10, np.round(explained, 2)
     assert max(errors) < 1.0, np.round(errors, 2)  # the track went on through the gap
-    assert tests >= 1 and found == 0  # a kidnap test ran and adopted nothing
+    assert tests == 0 and found == 0  # nothing contradicted its earlier frames: no kidnap test
     assert before is not None and after is not None and after.id == before.id  # the track was not dropped
     assert statuses[-1] in ("tracking", "ambiguous"), statuses
 

@@ -7,19 +7,21 @@ second case does the rest of the BEV show another place than the recent frames, 
 global search on the whole BEV keeps finding the old place: on the Carmen logs spliced at
 far-apart places it took 26-87 frames to recover.
 
-So the hypothesis "carried off" gets its own filter bank, fed by global rounds on what the
+A sensor carried off sees a discontinuity, one walking into what the map lacks does not:
+the first frame at the new place puts its walls where older frames saw open space
+(RollingBEV.last_contradiction, at least localizer.kidnap_contradiction). Only then does
+the localizer start a test (else the next round searches globally, as before).
+
+The hypothesis "carried off" gets its own filter bank, fed by global rounds on what the
 frames from the run's start on saw alone (the old place among their warm starts, so that
 it competes on the same evidence). It must earn `tracking` there by the tracker's own
 rules, as after a loss (confirm_rounds_after_loss hits, dominance, no close rival), and
 then be a better place (better_place): elsewhere than the tracked one, and explaining the
-recent frames as the monitor wants them explained, better than the old place. And the
-sensor must have seen a discontinuity before the test: a recent frame's walls cut through
-what older frames saw as open space (localizer.kidnap_contradiction), which a sensor
-carried off sees and one walking into a part the map lacks does not. Then the
+recent frames as the monitor wants them explained, better than the old place. Then the
 localizer adopts the bank and the BEV forgets what only older frames saw. If not within
-confirm_rounds_after_loss + 1 rounds, the test ends and nothing is lost: the BEV and the
-tracker are as they were, and the next round searches globally on the whole BEV. No frame
-is `tracking` while a test runs.
+confirm_rounds_after_loss + 1 rounds, the test ends and nothing is lost: the BEV is as it
+was and the tracker's own rounds went on meanwhile. No frame is `tracking` while a test
+runs.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ class KidnapTest:
     tracker: HypothesisTracker  # its own filter bank
     rounds_left: int
     contradiction: float  # the most any recent frame contradicted the BEV when the test started
-    discontinuous: bool  # that is at least localizer.kidnap_contradiction: only then can it adopt
+    discontinuous: bool  # that is at least localizer.kidnap_contradiction: only then does a test run
 
     @classmethod
     def start(cls, bev_stamp: int, settings: Settings, contradiction: float) -> "KidnapTest":
@@ -69,13 +71,11 @@ class KidnapTest:
 
     def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome, better: Callable[[Mode], bool]) -> Verdict:
         """One of the test's rounds landed: update the bank; better(found) says whether its
-        tracked mode is a better place than the old one (better_place). Only a test that
-        started on a discontinuity can adopt: a sensor walking on never sees its walls cut
-        through the open space it saw a moment ago, one carried off does."""
+        tracked mode is a better place than the old one (better_place)."""
         self.rounds_left -= 1
         if outcome.result is not None:
             self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
-        if self.tracker.status == "tracking" and self.discontinuous and better(self.tracker.best):
+        if self.tracker.status == "tracking" and better(self.tracker.best):
             return Verdict.CARRIED_OFF
         if self.rounds_left <= 0 or self.tracker.status == "tracking":
             return Verdict.NOT_CARRIED_OFF  # nothing else earned tracking (or the old place did)

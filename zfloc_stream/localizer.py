@@ -193,11 +193,18 @@ class Localizer:
 
     # ------------------------------------------------------------------------------
     def _start_kidnap_test(self) -> None:
-        """The monitor saw the tracked place stop explaining the frames: test whether the
-        sensor was carried off (kidnap_test.py)."""
-        if self._kidnap is None:
-            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0))
+        """The monitor saw the tracked place stop explaining the frames. If a recent frame
+        contradicted what older frames saw, test whether the sensor was carried off
+        (kidnap_test.py); else it walked into what the map lacks, and the next round
+        searches globally on the whole BEV."""
+        if self._kidnap is not None:
+            return
+        test = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0))
+        if test.discontinuous:
+            self._kidnap = test
             self.kidnap_tests += 1
+        else:
+            self.rounds.request_global_search()
 
     def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A kidnap test's round landed: adopt its bank (the BEV forgets what only older

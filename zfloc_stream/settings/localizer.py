@@ -19,7 +19,8 @@ class LocalizerSettings(Section):
     # not explain is a part of the building the floorplan lacks, clutter, or another place
     # (a kidnap, an odometry jump, a wrong mode); the monitor cannot tell them apart, so it
     # drops neither the track nor the BEV: it starts a kidnap test (kidnap_test.py), whose
-    # own filter bank must find a place that explains those frames better.
+    # own filter bank must find a place that explains those frames better, or asks for a
+    # global search (kidnap_contradiction).
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
     monitor_min_consistency: float = Field(0.05, ge=0, le=1)  # fraction of consistent points below which a frame is inconsistent (a jump gives ~0)
     monitor_min_points: int = Field(30, ge=1, le=1_000_000)  # frames with fewer wall points are not judged
@@ -29,13 +30,13 @@ class LocalizerSettings(Section):
     # over its last monitor_reference_frames consistent frames) is inconsistent too
     monitor_relative_share: float = Field(0.5, ge=0, le=1)
     monitor_reference_frames: int = Field(20, ge=1, le=10_000)
-    # the kidnap test adopts another place only if a frame of the last local_frames before
-    # it started cut through what older frames saw: this share of its wall hits landed where
-    # they saw open space (RollingBEV._contradiction). Carried off, the first frame there
-    # puts 0.5-0.99 of its hits in the old place's open space (the Carmen laser logs spliced),
-    # 0.24 on the built-in apartment's camera; walking into a part the map lacks, under
-    # 0.01 (the built-in office with walls erased), so a place elsewhere that explains
-    # those frames better is not adopted there
+    # a monitor run starts a kidnap test (kidnap_test.py) only if a frame of the last
+    # local_frames cut through what older frames saw: this share of its wall hits landed
+    # where they saw open space (RollingBEV._contradiction); else it asks for a global
+    # search. Carried off, the first frame there puts 0.5-0.99 of its hits in the old
+    # place's open space (the Carmen laser logs spliced), 0.24 on the built-in apartment's
+    # camera; walking into a part the map lacks, under 0.01 (the built-in office with walls
+    # erased), where a place 12.7 m away explains those frames better
     kidnap_contradiction: float = Field(0.15, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
