@@ -1,5 +1,6 @@
 """Running a Localizer in tests (test_localizer*.py, test_threads.py): frames whose odometry
-jumps, a run with settings overrides, and an estimate as bytes for bit-for-bit checks."""
+jumps, a camera carried off, a run with settings overrides, and an estimate as bytes for
+bit-for-bit checks."""
 
 from dataclasses import replace
 
@@ -22,6 +23,14 @@ class Kidnapped:
     def __iter__(self):
         for k, frame in enumerate(self.seq):
             yield frame if k < self.k0 else replace(frame, T_odom_cam=self.jump @ frame.T_odom_cam)
+
+
+def carried_off(frames, k0, later, count):
+    """frames[:k0], then `count` frames from frames[later] on, their odometry re-anchored so
+    that it stands still across the cut: the camera was carried from frame k0 - 1's place
+    to frame later's."""
+    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
+    return frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + count]]
 
 
 def settings_with(*overrides):

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from localizer_helpers import Kidnapped
+from localizer_helpers import Kidnapped, carried_off
 
 from zfloc_stream.config import Settings
 from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
@@ -133,8 +133,7 @@ def test_a_sensor_carried_off_is_found_again_by_the_kidnap_test():
     scene = build_scene("apartment", seed=2)
     seq = simulate(scene, SimSettings(), seed=2, n_frames=260)
     frames, k0, later = list(seq), 50, 150
-    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
-    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + 50]]
+    spliced = carried_off(frames, k0, later, 50)
     truth = list(seq.poses[:k0]) + list(seq.poses[later:later + 50])
     assert np.linalg.norm(truth[k0][:2] - truth[k0 - 1][:2]) > 4.0  # really carried off
     settings = Settings()
@@ -156,9 +155,7 @@ def test_kidnap_contradiction_is_the_evidence_a_kidnap_needs():
     what its frames contradicted the BEV, and not just above it."""
     scene = build_scene("apartment", seed=2)
     seq = simulate(scene, SimSettings(), seed=2, n_frames=260)
-    frames, k0, later = list(seq), 50, 150
-    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
-    spliced = frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + 30]]
+    spliced = carried_off(list(seq), 50, 150, 30)
 
     def run(threshold=None):
         settings = Settings() if threshold is None else Settings(localizer={"kidnap_contradiction": threshold})

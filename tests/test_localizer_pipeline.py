@@ -2,14 +2,13 @@
 frame i + round_delay, so a worker gives bit for bit what the same round computed inline
 and applied at the same frame ("delayed"); inline mode stays today's behaviour."""
 
-from dataclasses import replace
 from pathlib import Path
 
 import threading
 
 import numpy as np
 import pytest
-from localizer_helpers import Kidnapped, estimate_bits, run_localizer, settings_with
+from localizer_helpers import Kidnapped, carried_off, estimate_bits, run_localizer, settings_with
 
 from zfloc_stream import round_scheduler as round_scheduler_module
 from zfloc_stream.config import load_settings
@@ -51,9 +50,7 @@ def test_a_kidnap_test_on_the_worker_gives_the_same_bits():
     rounds run on the worker beside the tracker's, and the run is the delayed one's, bit for
     bit, adoption included."""
     scene = build_scene("apartment", seed=2)
-    frames = list(simulate(scene, SimSettings(), seed=2, n_frames=260))
-    anchor = frames[49].T_odom_cam @ np.linalg.inv(frames[150].T_odom_cam)
-    spliced = frames[:50] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[150:180]]
+    spliced = carried_off(list(simulate(scene, SimSettings(), seed=2, n_frames=260)), 50, 150, 30)
     delayed = run_localizer(scene.floorplan, spliced, settings_with("localizer.pipeline=delayed"))
     with Localizer(scene.floorplan, settings_with("localizer.pipeline=pipelined")) as loc:
         piped = [loc.push(f) for f in spliced]
