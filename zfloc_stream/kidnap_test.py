@@ -51,7 +51,6 @@ class KidnapTest:
     tracker: HypothesisTracker  # its own filter bank
     rounds_left: int
     contradiction: float  # the most any recent frame contradicted the BEV when the test started
-    discontinuous: bool  # that is at least localizer.kidnap_contradiction: only then does a test run
 
     @classmethod
     def start(cls, bev_stamp: int, settings: Settings, contradiction: float) -> "KidnapTest":
@@ -61,7 +60,7 @@ class KidnapTest:
         bank = HypothesisTracker(settings.tracking)
         bank.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
         return cls(bev_stamp - settings.localizer.monitor_frames + 1, bank, settings.tracking.confirm_rounds_after_loss + 1,
-                   contradiction, contradiction >= settings.localizer.kidnap_contradiction)
+                   contradiction)
 
     def job(self, index: int, snapshot, old: Mode | None) -> RoundJob:
         """The test's round started at frame index: a global search on `snapshot` (the BEV

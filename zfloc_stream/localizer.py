@@ -199,9 +199,9 @@ class Localizer:
         searches globally on the whole BEV."""
         if self._kidnap is not None:
             return
-        test = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0))
-        if test.discontinuous:
-            self._kidnap = test
+        contradiction = max(self._recent_contradiction, default=0.0)
+        if contradiction >= self.settings.localizer.kidnap_contradiction:
+            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, contradiction)
             self.kidnap_tests += 1
         else:
             self.rounds.request_global_search()
