@@ -43,14 +43,14 @@ from ..sim2 import Sim2
 from .bev_snapshot import BevSnapshot, wall_cells
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
-from .scan_match import match_scan
+from .scan_match import match_scan, step_bounds
 from .scrolling_grid import ScrollingGrid, increment
 from .wallmask import refine_wall_points, upright_rotation
 
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
 
 # Scan matching reads the wall grid on a crop around the frame's hits, widened by this many
-# times bev.scan_match_max_shift: points moved by up to the largest correction still see the
+# times the largest correction allowed (scan_match.step_bounds): points moved by up to the largest correction still see the
 # walls they may match; a crop under SCAN_MATCH_MIN_CROP_CELLS on a side has no interior for
 # the distance field's gradient, so the frame is fused uncorrected.
 SCAN_MATCH_CROP_MARGIN_SHIFTS = 2
@@ -93,6 +93,7 @@ class RollingBEV:
         self.last_contradiction = 0.0  # of the last fused frame (_contradiction)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
+        self._last_odometry: tuple | None = None  # the last matched frame's odometry plane pose (x, y, yaw)
 
     # ------------------------------------------------------------------------------
     # public API
@@ -133,6 +134,7 @@ class RollingBEV:
         self.grid = ScrollingGrid(self.grid.n, self.grid.res)
         self.last_wall_hits = np.zeros((0, 2))
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
+        self._last_odometry = None
 
     def forget_before(self, stamp: int) -> None:
         """Keep only what frames from this stamp on touched (the sensor was carried off:
@@ -214,11 +216,13 @@ class RollingBEV:
         """Scan matching: update the correction so this frame's wall hits (uncorrected
         plane frame) lie on the BEV walls."""
         g, b = self.grid, self.settings.bev
+        last, self._last_odometry = self._last_odometry, tuple(odom_pose)
         if g.ix0 is None or len(hits_odom) == 0:
             return
+        max_shift, max_angle = step_bounds(last, odom_pose, b)
         hits = self._correct_points(hits_odom)
         centre = np.array(self._corrected(*odom_pose)[:2])
-        margin = SCAN_MATCH_CROP_MARGIN_SHIFTS * b.scan_match_max_shift
+        margin = SCAN_MATCH_CROP_MARGIN_SHIFTS * max_shift
         lo = np.floor((hits.min(axis=0) - margin) / g.res).astype(int) - [g.ix0, g.iy0]
         hi = np.ceil((hits.max(axis=0) + margin) / g.res).astype(int) - [g.ix0, g.iy0]
         c0, r0 = np.clip(lo, 0, g.n)
@@ -227,7 +231,7 @@ class RollingBEV:
             return
         mask = wall_cells(g.wall[r0:r1, c0:c1], g.hits[r0:r1, c0:c1], g.logodds[r0:r1, c0:c1], b)
         origin = np.array([(g.ix0 + c0) * g.res, (g.iy0 + r0) * g.res])
-        step = match_scan(mask, origin, g.res, hits, centre, b)
+        step = match_scan(mask, origin, g.res, hits, centre, b, max_shift, max_angle)
         if step is None:
             return
         dtheta, dt = step

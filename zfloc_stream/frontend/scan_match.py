@@ -26,6 +26,7 @@ import numpy as np
 
 from ..config import BevSettings, RefineSettings
 from ..field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
+from ..numba_support import njit
 
 
 @dataclass(frozen=True)
@@ -42,9 +43,27 @@ class GridField:
 # or a wall the BEV has not seen yet and does not pull at all.
 HUBER_DELTA_PER_INLIER = 0.5
 OUTLIER_PER_INLIER = 2.0
+# The coarse search's shift grid, in BEV cells: the LM's basin (the loss is cut at
+# 2 x inlier_distance, 0.3 m) is several such steps wide, so a finer grid only costs time.
+COARSE_SHIFT_STEP_CELLS = 2
+
+def step_bounds(last_odometry, odometry, settings: BevSettings) -> tuple[float, float]:
+    """The largest correction (metres, radians) scan matching may make to a frame whose
+    odometry plane pose is `odometry` (x, y, yaw), `last_odometry` the previous matched
+    frame's (None: the first). Odometry errs in proportion to the motion it measures, so the
+    bounds grow with the step and the turn since that frame: a sparse log (1 m and 15-75 deg
+    between scans) needs wider bounds than a 10 Hz stream, and a sensor standing still
+    (or carried off while its odometry stands still) gets only the base bounds."""
+    shift, angle = settings.scan_match_max_shift, np.deg2rad(settings.scan_match_max_angle_deg)
+    if last_odometry is None:
+        return shift, angle
+    step = float(np.hypot(odometry[0] - last_odometry[0], odometry[1] - last_odometry[1]))
+    turn = abs(float(np.angle(np.exp(1j * (odometry[2] - last_odometry[2])))))
+    return shift + settings.scan_match_shift_per_step * step, angle + settings.scan_match_angle_per_turn * turn
+
 
 def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float, hits: np.ndarray,
-               centre: np.ndarray, settings: BevSettings) -> tuple[float, np.ndarray] | None:
+               centre: np.ndarray, settings: BevSettings, max_shift: float, max_angle: float) -> tuple[float, np.ndarray] | None:
     """Rigid correction (dtheta, dt) that moves the hits (plane frame) onto the walls of
     wall_mask (a BEV crop whose cell (0, 0) has its corner at crop_origin), as
     x' = R(dtheta) (x - centre) + centre + dt; None when the crop holds too few walls to
@@ -60,9 +79,12 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     near = settings.scan_match_inlier_distance
     refine = RefineSettings(huber_delta=HUBER_DELTA_PER_INLIER * near, outlier_distance=OUTLIER_PER_INLIER * near,
                             max_points=settings.scan_match_max_points, max_evaluations=settings.scan_match_max_evaluations)
-    model = refine_batch(grid, points, np.array([[0.0, 0.0, 0.0, 1.0]]), refine, "fixed")[0]
+    start = _coarse_search(grid.distance_field, grid.origin, resolution, points, refine.huber_delta, refine.outlier_distance,
+                           max_angle, np.deg2rad(settings.scan_match_angle_step_deg), max_shift,
+                           COARSE_SHIFT_STEP_CELLS * resolution)
+    model = refine_batch(grid, points, start[None, :], refine, "fixed")[0]
     dt, dtheta = model[:2], float(model[2])
-    if not np.isfinite(model).all() or np.hypot(*dt) > settings.scan_match_max_shift or abs(dtheta) > np.deg2rad(settings.scan_match_max_angle_deg):
+    if not np.isfinite(model).all() or np.hypot(*dt) > max_shift or abs(dtheta) > max_angle:
         return None
     c, s = np.cos(dtheta), np.sin(dtheta)
     moved = points @ np.array([[c, s], [-s, c]]) + dt
@@ -90,3 +112,40 @@ def _share_near(grid: GridField, points: np.ndarray, distance: float) -> float:
     d = np.full(len(points), np.inf)
     d[inside] = grid.distance_field[cells[inside, 1], cells[inside, 0]]
     return float(np.mean(d < distance))
+
+
+@njit
+def _coarse_search(field, origin, resolution, points, delta, cutoff, max_angle, angle_step, max_shift, shift_step):
+    """The best rigid step on a grid (angles every angle_step within +-max_angle, shifts
+    every shift_step within +-max_shift per axis) by the fit's truncated Huber cost, each
+    hit read at its nearest cell; ties go to the smaller step. The LM starts there: from
+    the odometry alone it cannot see a wall more than the loss's cutoff away, which a
+    few degrees of heading error put a hit at a few metres' range (model row (tx, ty,
+    theta, 1))."""
+    h, w = field.shape
+    n_angles = int(np.floor(max_angle / angle_step + 1e-9))
+    n_shifts = int(np.floor(max_shift / shift_step + 1e-9))
+    best = np.array([0.0, 0.0, 0.0, 1.0])
+    best_cost, best_size = np.inf, np.inf
+    for ia in range(-n_angles, n_angles + 1):
+        theta = ia * angle_step
+        c, s = np.cos(theta), np.sin(theta)
+        rx = c * points[:, 0] - s * points[:, 1]
+        ry = s * points[:, 0] + c * points[:, 1]
+        for iy in range(-n_shifts, n_shifts + 1):
+            for ix in range(-n_shifts, n_shifts + 1):
+                cost = 0.0
+                for k in range(len(points)):
+                    col = int(np.floor((rx[k] + ix * shift_step - origin[0]) / resolution))
+                    row = int(np.floor((ry[k] + iy * shift_step - origin[1]) / resolution))
+                    a = cutoff
+                    if 0 <= col < w and 0 <= row < h:
+                        a = min(field[row, col], cutoff)
+                    cost += 0.5 * a * a if a <= delta else delta * (a - 0.5 * delta)
+                    if cost > best_cost:
+                        break
+                size = (ix * ix + iy * iy) * shift_step * shift_step + theta * theta
+                if cost < best_cost or (cost == best_cost and size < best_size):
+                    best_cost, best_size = cost, size
+                    best[0], best[1], best[2] = ix * shift_step, iy * shift_step, theta
+    return best

@@ -112,6 +112,11 @@ class BevSettings(Section):
     scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
     scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
     scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)
+    # odometry errs in proportion to its motion: the bounds above grow by these fractions of
+    # the step (m) and the turn since the last matched frame (frontend/scan_match.step_bounds)
+    scan_match_shift_per_step: float = Field(0.2, ge=0, le=10)
+    scan_match_angle_per_turn: float = Field(0.1, ge=0, le=10)
+    scan_match_angle_step_deg: float = Field(0.5, gt=0, le=180)  # the coarse search's rotation step before the LM
     scan_match_min_gain: float = Field(0.2, ge=0, lt=1)  # a correction must lower the hits' robust cost by this fraction
 
     _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
