@@ -82,12 +82,17 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     start = _coarse_search(grid.distance_field, grid.origin, resolution, points, refine.huber_delta, refine.outlier_distance,
                            max_angle, np.deg2rad(settings.scan_match_angle_step_deg), max_shift,
                            COARSE_SHIFT_STEP_CELLS * resolution)
-    model = refine_batch(grid, points, start[None, :], refine, "fixed")[0]
+    # LM from the odometry and from the coarse search's best; the coarse start wins only
+    # when it fits clearly better (by scan_match_min_gain, like any correction): where both
+    # fit about as well (a corridor's length, a symmetric room) the odometry is believed
+    starts = np.array([[0.0, 0.0, 0.0, 1.0], start])
+    models = refine_batch(grid, points, starts, refine, "fixed")
+    costs = [huber_cost(_residuals(grid, _moved(points, m)), refine.huber_delta, refine.outlier_distance) for m in models]
+    model = models[1] if costs[1] < (1.0 - settings.scan_match_min_gain) * costs[0] else models[0]
     dt, dtheta = model[:2], float(model[2])
     if not np.isfinite(model).all() or np.hypot(*dt) > max_shift or abs(dtheta) > max_angle:
         return None
-    c, s = np.cos(dtheta), np.sin(dtheta)
-    moved = points @ np.array([[c, s], [-s, c]]) + dt
+    moved = _moved(points, model)
     # A step that fits the hits only a little better is fitting the grid's quantisation and
     # the range noise, not drift: taken, such steps would random-walk a perfect odometry
     # away. Drift of a few centimetres on hits that sit within a cell of their walls halves
@@ -99,6 +104,12 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     if _share_near(grid, moved, near) < _share_near(grid, points, near):
         return None
     return dtheta, dt
+
+
+def _moved(points: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """The points under a rigid model row (tx, ty, theta, 1)."""
+    c, s = np.cos(model[2]), np.sin(model[2])
+    return points @ np.array([[c, s], [-s, c]]) + model[:2]
 
 
 def _residuals(grid: GridField, points: np.ndarray) -> np.ndarray:
