@@ -6,7 +6,7 @@ from zfloc_stream.errors import ConfigError, FrameError, InputError
 from zfloc_stream.frames import LaserFrame
 from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.rng import make_rng
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.sim2 import Sim2, wrap_angle
 
 ROOM = (0.0, 0.0, 10.0, 6.0)  # x0, y0, x1, y1: an empty rectangular room
 
@@ -228,6 +228,45 @@ def test_scan_matching_keeps_the_map_sharp_under_drifting_odometry():
     assert smeared > 0.5 and drifted > 1.0  # the drift is real (measured: 2.4 m and 3.8 m)
     assert sharp < 0.05  # 90% of the wall points within 5 cm of a true wall (measured: 0.025 m)
     assert tracked < 0.1  # (measured: 0.036 m)
+
+
+def test_scan_matching_corrects_a_sparse_log_whose_turns_odometry_underreports():
+    # Scans 0.6 m and 60 deg apart (a sparse log, like the shared orebro log's 1 m and up
+    # to 76 deg), the odometry reporting each turn 10% short: 6 deg per frame, more than
+    # scan_match_max_angle_deg (5) alone allows and, at the room's 5-8 m ranges, hits
+    # 0.5-0.8 m off, beyond the LM's loss cutoff (0.3 m). The bounds grow with the turn
+    # (scan_match_angle_per_turn) and the coarse search finds the basin: the heading stays
+    # within a degree. Without the growth each correction is refused and the heading drifts.
+    def final_heading_error(overrides):
+        bev = RollingBEV(load_settings(overrides=["bev.scan_match=laser", *overrides]))
+        reported = 0.0
+        for i in range(8):
+            x, y, yaw = 5.0 + 0.6 * np.cos(i), 3.0 + 0.6 * np.sin(i), np.deg2rad(60.0) * i
+            frame = laser(x, y, yaw, n=360, t=i)
+            if i:
+                reported += np.deg2rad(54.0)
+            # the odometry's position is exact: only its heading drifts
+            frame = LaserFrame(frame.ranges, frame.angle_min, frame.angle_increment, 0.05, 30.0, pose(x, y, reported), i)
+            bev.add(frame)
+            heading_error = np.rad2deg(abs(wrap_angle(bev.plane_pose(frame)[2] - yaw)))
+        return heading_error
+
+    assert final_heading_error([]) < 1.0  # (measured: 0.0x deg)
+    drifted = final_heading_error(["bev.scan_match_angle_per_turn=0", "bev.scan_match_shift_per_step=0"])
+    assert drifted > 20.0  # 7 turns x 6 deg, none corrected (measured: 42 deg)
+
+
+def test_scan_matching_bounds_grow_with_the_odometry_step_and_turn():
+    from zfloc_stream.frontend.scan_match import step_bounds
+
+    b = load_settings(overrides=["bev.scan_match_max_shift=0.3", "bev.scan_match_max_angle_deg=5",
+                                 "bev.scan_match_shift_per_step=0.2", "bev.scan_match_angle_per_turn=0.1"]).bev
+    assert step_bounds(None, (1.0, 2.0, 0.3), b) == (0.3, pytest.approx(np.deg2rad(5.0)))
+    # standing still (or carried off while the odometry stood still): the base bounds
+    assert step_bounds((1.0, 2.0, 0.3), (1.0, 2.0, 0.3), b) == (pytest.approx(0.3), pytest.approx(np.deg2rad(5.0)))
+    # 3-4-5 m step and a 60 deg turn across the +-pi seam
+    shift, angle = step_bounds((0.0, 0.0, np.pi - 0.5), (3.0, 4.0, -np.pi + np.deg2rad(60.0) - 0.5), b)
+    assert shift == pytest.approx(0.3 + 0.2 * 5.0) and angle == pytest.approx(np.deg2rad(5.0 + 6.0))
 
 
 # --- the observation's grids ----------------------------------------------------------------
