@@ -65,23 +65,32 @@ class DepthScaleEstimator:
         self._recent.append((raw, camera))
 
     def _cost_curve(self, raw: np.ndarray, camera: np.ndarray) -> np.ndarray | None:
-        """Mean truncated distance of the older frames' raw hits, shifted by their baseline
-        over each factor, to the newest frame's raw hits; None when no older hit can fall in
-        the newest frame's field."""
+        """Mean truncated distance, across each wall, of the older frames' raw hits (shifted
+        by their baseline over each factor) to the newest frame's raw hits; None when no
+        older hit lies near them. Only the hits within CUTOFF of the newest frame's at the
+        current estimate count, and only their motion across the wall they lie on (the
+        distance field's gradient there): a shift along a wall, or into a stretch the
+        newest frame happens to see, says nothing about the depth's scale."""
         lo = raw.min(axis=0) - CUTOFF
         shape = np.ceil((raw.max(axis=0) + CUTOFF - lo) / FIELD_RESOLUTION).astype(int) + 1
         occupied = np.ones((shape[1], shape[0]), dtype=np.uint8)
         cells = np.floor((raw - lo) / FIELD_RESOLUTION).astype(int)
         occupied[cells[:, 1], cells[:, 0]] = 0
         field = cv2.distanceTransform(occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * FIELD_RESOLUTION
+        gy, gx = np.gradient(field)
         older = np.concatenate([r for r, _ in self._recent])
         baseline = np.concatenate([np.broadcast_to(c - camera, r.shape) for r, c in self._recent])
-        # (factors, hits, 2): each older hit where it lands at each factor
-        q = older[None] + baseline[None] / self.factors[:, None, None]
-        cells = np.floor((q - lo) / FIELD_RESOLUTION).astype(int)
-        inside = (cells[..., 0] >= 0) & (cells[..., 0] < shape[0]) & (cells[..., 1] >= 0) & (cells[..., 1] < shape[1])
-        if not inside.any():
+        here = older + baseline / self.factor
+        cells = np.floor((here - lo) / FIELD_RESOLUTION).astype(int)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < shape[1])
+        d0 = np.full(len(older), np.inf)
+        d0[inside] = field[cells[inside, 1], cells[inside, 0]]
+        near = d0 < CUTOFF
+        if not near.any():
             return None
-        d = np.full(inside.shape, CUTOFF)
-        d[inside] = np.minimum(field[cells[inside][:, 1], cells[inside][:, 0]], CUTOFF)
-        return d.mean(axis=1)
+        r, c = cells[near, 1], cells[near, 0]
+        normal = np.stack([gx[r, c], gy[r, c]], axis=1)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        # each near hit's distance across its wall as the factor moves it: (factors, near)
+        moved = (1.0 / self.factors[:, None] - 1.0 / self.factor) * np.einsum("ij,ij->i", baseline[near], normal)[None]
+        return np.minimum(np.abs(d0[near][None] + moved), CUTOFF).mean(axis=1)

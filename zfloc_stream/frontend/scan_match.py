@@ -43,9 +43,6 @@ class GridField:
 # or a wall the BEV has not seen yet and does not pull at all.
 HUBER_DELTA_PER_INLIER = 0.5
 OUTLIER_PER_INLIER = 2.0
-# The coarse search's shift grid, in BEV cells: the LM's basin (the loss is cut at
-# 2 x inlier_distance, 0.3 m) is several such steps wide, so a finer grid only costs time.
-COARSE_SHIFT_STEP_CELLS = 2
 
 def step_bounds(last_odometry, odometry, settings: BevSettings) -> tuple[float, float]:
     """The largest correction (metres, radians) scan matching may make to a frame whose
@@ -79,16 +76,15 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     near = settings.scan_match_inlier_distance
     refine = RefineSettings(huber_delta=HUBER_DELTA_PER_INLIER * near, outlier_distance=OUTLIER_PER_INLIER * near,
                             max_points=settings.scan_match_max_points, max_evaluations=settings.scan_match_max_evaluations)
-    start = _coarse_search(grid.distance_field, grid.origin, resolution, points, refine.huber_delta, refine.outlier_distance,
-                           max_angle, np.deg2rad(settings.scan_match_angle_step_deg), max_shift,
-                           COARSE_SHIFT_STEP_CELLS * resolution)
-    # LM from the odometry and from the coarse search's best; the coarse start wins only
-    # when it fits clearly better (by scan_match_min_gain, like any correction): where both
-    # fit about as well (a corridor's length, a symmetric room) the odometry is believed
-    starts = np.array([[0.0, 0.0, 0.0, 1.0], start])
+    # LM from the odometry and from the best rotation; the rotated start wins only when it
+    # fits clearly better (by scan_match_min_gain, like any correction): where both fit
+    # about as well the odometry is believed
+    theta = _best_rotation(grid.distance_field, grid.origin, resolution, points, refine.huber_delta,
+                           refine.outlier_distance, max_angle, np.deg2rad(settings.scan_match_angle_step_deg))
+    starts = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, theta, 1.0]][: 1 + (theta != 0.0)])
     models = refine_batch(grid, points, starts, refine, "fixed")
     costs = [huber_cost(_residuals(grid, _moved(points, m)), refine.huber_delta, refine.outlier_distance) for m in models]
-    model = models[1] if costs[1] < (1.0 - settings.scan_match_min_gain) * costs[0] else models[0]
+    model = models[-1] if costs[-1] < (1.0 - settings.scan_match_min_gain) * costs[0] else models[0]
     dt, dtheta = model[:2], float(model[2])
     if not np.isfinite(model).all() or np.hypot(*dt) > max_shift or abs(dtheta) > max_angle:
         return None
@@ -126,37 +122,32 @@ def _share_near(grid: GridField, points: np.ndarray, distance: float) -> float:
 
 
 @njit
-def _coarse_search(field, origin, resolution, points, delta, cutoff, max_angle, angle_step, max_shift, shift_step):
-    """The best rigid step on a grid (angles every angle_step within +-max_angle, shifts
-    every shift_step within +-max_shift per axis) by the fit's truncated Huber cost, each
-    hit read at its nearest cell; ties go to the smaller step. The LM starts there: from
-    the odometry alone it cannot see a wall more than the loss's cutoff away, which a
-    few degrees of heading error put a hit at a few metres' range (model row (tx, ty,
-    theta, 1))."""
+def _best_rotation(field, origin, resolution, points, delta, cutoff, max_angle, angle_step):
+    """The rotation about the sensor, every angle_step within +-max_angle, whose hits cost
+    least by the fit's truncated Huber loss, each hit read at its nearest cell; ties go to
+    the smaller angle. The LM starts there as well as at the odometry: from the odometry
+    alone it cannot see a wall more than the loss's cutoff away, and a few degrees of
+    heading error put the hits at a few metres' range that far off. Rotation only: the
+    translation error of one step stays inside the LM's reach, and a shift search finds
+    the repeats of a corridor (the built-in office: 0.25-0.3 m jumps along it)."""
     h, w = field.shape
     n_angles = int(np.floor(max_angle / angle_step + 1e-9))
-    n_shifts = int(np.floor(max_shift / shift_step + 1e-9))
-    best = np.array([0.0, 0.0, 0.0, 1.0])
-    best_cost, best_size = np.inf, np.inf
-    for ia in range(-n_angles, n_angles + 1):
+    best, best_cost = 0.0, np.inf
+    for step in range(0, 2 * n_angles + 1):
+        # 0, +1, -1, +2, -2, ...: a strictly lower cost is needed to move away from zero
+        ia = (step + 1) // 2 if step % 2 else -(step // 2)
         theta = ia * angle_step
         c, s = np.cos(theta), np.sin(theta)
-        rx = c * points[:, 0] - s * points[:, 1]
-        ry = s * points[:, 0] + c * points[:, 1]
-        for iy in range(-n_shifts, n_shifts + 1):
-            for ix in range(-n_shifts, n_shifts + 1):
-                cost = 0.0
-                for k in range(len(points)):
-                    col = int(np.floor((rx[k] + ix * shift_step - origin[0]) / resolution))
-                    row = int(np.floor((ry[k] + iy * shift_step - origin[1]) / resolution))
-                    a = cutoff
-                    if 0 <= col < w and 0 <= row < h:
-                        a = min(field[row, col], cutoff)
-                    cost += 0.5 * a * a if a <= delta else delta * (a - 0.5 * delta)
-                    if cost > best_cost:
-                        break
-                size = (ix * ix + iy * iy) * shift_step * shift_step + theta * theta
-                if cost < best_cost or (cost == best_cost and size < best_size):
-                    best_cost, best_size = cost, size
-                    best[0], best[1], best[2] = ix * shift_step, iy * shift_step, theta
+        cost = 0.0
+        for k in range(len(points)):
+            col = int(np.floor((c * points[k, 0] - s * points[k, 1] - origin[0]) / resolution))
+            row = int(np.floor((s * points[k, 0] + c * points[k, 1] - origin[1]) / resolution))
+            a = cutoff
+            if 0 <= col < w and 0 <= row < h:
+                a = min(field[row, col], cutoff)
+            cost += 0.5 * a * a if a <= delta else delta * (a - 0.5 * delta)
+            if cost >= best_cost:
+                break
+        if cost < best_cost:
+            best, best_cost = theta, cost
     return best
