@@ -43,7 +43,6 @@ from ..sim2 import Sim2
 from .bev_snapshot import BevSnapshot, wall_cells
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame
-from .depth_scale import DepthScaleEstimator
 from .scan_match import match_scan, step_bounds
 from .scrolling_grid import ScrollingGrid, increment
 from .wallmask import refine_wall_points, upright_rotation
@@ -95,7 +94,6 @@ class RollingBEV:
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
         self._last_odometry: tuple | None = None  # the last matched frame's odometry plane pose (x, y, yaw)
-        self.depth_scale = DepthScaleEstimator(f)  # camera depth's factor against the odometry
 
     # ------------------------------------------------------------------------------
     # public API
@@ -269,8 +267,6 @@ class RollingBEV:
         s = self.pixel_stride(frame.shape)
         o = s // 2
         depth = frame.depth[o::s, o::s]
-        if self.depth_scale.factor != 1.0:
-            depth = depth * depth.dtype.type(self.depth_scale.factor)
         labels = None if frame.labels is None else frame.labels[o::s, o::s]
         K = frame.K.copy()
         K[0, :] /= s
@@ -328,8 +324,6 @@ class RollingBEV:
         wall &= above
         sensor = plane_pose(T, R_plane, "z")
         xy = pts[:, :2]
-        if self.depth_scale.enabled:
-            self.depth_scale.observe(xy[wall], np.array(sensor[:2]), self.depth_scale.factor)
         if self.settings.bev.scan_match == "all":
             self._match(xy[wall], sensor)
         xy, sensor = self._correct_points(xy), self._corrected(*sensor)

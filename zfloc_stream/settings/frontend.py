@@ -68,18 +68,6 @@ class FrontendSettings(Section):
     max_depth: float = Field(10.0, gt=0, le=1000)  # m, depth readings beyond this are ignored
     min_obstacle_height: float = Field(0.1, ge=0, le=10)  # m above floor: lower non-floor points do not occupy
     max_obstacle_height: float = Field(2.0, gt=0, le=20)  # m above floor: higher points do not occupy (ceiling, lamps)
-    # Camera depth's scale against the metric odometry (frontend/depth_scale.py): "estimate"
-    # measures the factor (within [depth_scale_min, depth_scale_max], every
-    # depth_scale_step) from how the walls of successive frames line up, and multiplies
-    # later frames' depth by it (a monocular network's depth is off by a global factor);
-    # "metric" takes depth as it comes.
-    depth_scale: Literal["metric", "estimate"] = "metric"
-    depth_scale_min: float = Field(0.8, gt=0, le=1)
-    depth_scale_max: float = Field(1.25, ge=1, le=10)
-    depth_scale_step: float = Field(0.005, gt=0, le=1)
-    depth_scale_frames: int = Field(10, ge=1, le=1000)  # older frames each frame's walls are compared with
-    depth_scale_min_frames: int = Field(5, ge=1, le=100_000)  # frames measured before the estimate is used
-    depth_scale_points: int = Field(200, ge=10, le=100_000)  # wall hits kept per frame (evenly thinned)
 
     _ordered = ordered(("min_obstacle_height", "max_obstacle_height"))
 
