@@ -64,6 +64,7 @@ class Localizer:
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
         self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
+        self._recent_cameras: deque[np.ndarray] = deque(maxlen=self._recent_hits.maxlen)  # each recent frame's plane position
         self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
@@ -80,12 +81,13 @@ class Localizer:
         plane_pose, skipped = self._fuse(frame, timings)
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
+            self._recent_cameras.append(plane_pose[:2])
             self._recent_contradiction.append(self.bev.last_contradiction)
             # only a tracked alignment is watched, as reported (the local refinement's)
             tracked = self.tracker.best if self.tracker.status == "tracking" else None
             if self.monitor.wants_global_search(None if tracked is None else tracked.id,
                                                 None if tracked is None else self.local.alignment_of_mode(tracked),
-                                                self.bev.last_wall_hits):
+                                                self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
                 self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
@@ -235,7 +237,7 @@ class Localizer:
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.local.update(self.tracker.best, self._recent_hits, self.frames_fused)
+        self.local.update(self.tracker.best, self._recent_hits, self.frames_fused, self._recent_cameras)
         timings["local_refinement"] = time.perf_counter() - t0
         if outcome is not None:
             outcome.timings["local_refinement"] = timings["local_refinement"]
@@ -253,7 +255,8 @@ class Localizer:
             cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
-        consistent = None if alignment is None else self.monitor.frame_consistent(alignment, self.bev.last_wall_hits, best.id)
+        consistent = None if alignment is None else self.monitor.frame_consistent(
+            alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         if self._kidnap is not None and alignment is not None:
             consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
         status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)

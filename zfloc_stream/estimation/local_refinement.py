@@ -41,15 +41,36 @@ class LocalRefinement:
         self.alignment: Sim2 | None = None  # its last accepted local alignment
         self._frame = 0  # fused frames counted at the last refinement
 
+    @property
+    def metric_odometry(self) -> bool:
+        """localizer.odometry_scale "metric" with a scale to estimate: the alignment's scale
+        is the depth's, the trajectory maps at the floorplan's expected scale (module
+        docstring)."""
+        return self.settings.odometry_scale == "metric" and self.estimator.scale_mode != "fixed"
+
+    def frame_hits(self, hits: np.ndarray, camera_xy, mode) -> np.ndarray:
+        """A frame's wall hits as the reported alignment reads them: under metric odometry
+        each hit rescaled about its camera by the mode's depth factor (its scale over
+        estimator.scale_prior), else as fused."""
+        if mode is None or not self.metric_odometry or not len(hits):
+            return hits
+        q = mode.alignment.s / self.estimator.scale_prior
+        camera = np.asarray(camera_xy, dtype=float)
+        return camera + q * (hits - camera)
+
     def alignment_of_mode(self, mode) -> Sim2:
         """What to report for the tracked mode: the chain's alignment when it follows that
         mode, else the mode's own."""
         return self.alignment if self.mode_id == mode.id else mode.alignment
 
-    def update(self, best, recent_hits, frames_fused: int) -> None:
+    def update(self, best, recent_hits, frames_fused: int, recent_cameras=None) -> None:
         """One refinement of the tracked mode `best` (None: nothing tracked) on the recent
-        frames' wall hits (plane frame, one array per frame)."""
+        frames' wall hits (plane frame, one array per frame; recent_cameras: each frame's
+        camera position, needed under metric odometry)."""
         cfg = self.settings
+        metric = self.metric_odometry and recent_cameras is not None
+        if metric:
+            recent_hits = [self.frame_hits(h, c, best) for h, c in zip(recent_hits, recent_cameras)]
         hits = [h for h in recent_hits if len(h)]
         if cfg.local_frames == 0 or best is None or not hits:
             self._reset()
@@ -59,8 +80,14 @@ class LocalRefinement:
         centre = points.mean(axis=0)
         continuing = self.mode_id == best.id
         start = self.alignment if continuing else best.alignment
+        if metric and not continuing:
+            # the mode's alignment at the trajectory's scale, about the recent cameras
+            # (where, fitted to hits seen from there, it maps the cameras right)
+            anchor = np.mean(np.asarray(list(recent_cameras), dtype=float), axis=0)
+            s = self.estimator.scale_prior
+            start = Sim2(s, start.theta, start.apply(anchor) - s * start.R @ anchor)
         # (a fixed-scale mode's s is 1 only up to the filter's round-off: keep it out)
-        if continuing and self.estimator.scale_mode != "fixed" and start.s != best.alignment.s:
+        if continuing and not metric and self.estimator.scale_mode != "fixed" and start.s != best.alignment.s:
             # The local fit keeps the scale fixed (ten frames of hits barely observe it);
             # the rounds measure it on the whole BEV, so the chain takes the mode's scale,
             # about the recent hits' centre (where the local fit put them stays put).

@@ -48,6 +48,14 @@ class LocalizerSettings(Section):
     local_max_step: float = Field(0.2, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
     local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
+    # What scale the odometry's translations have, when the scale is estimated
+    # (estimator.scale_mode prior or free): "shared", one unknown scale for depth and
+    # odometry (a monocular reconstruction; the built-in scenes), so the alignment's scale
+    # maps the trajectory too; "metric", the odometry is metric (VIO, wheels) and only the
+    # depth may be off (a monocular depth network): the trajectory maps at
+    # estimator.scale_prior and the alignment's scale rescales each frame's hits about its
+    # own camera (estimation/local_refinement.py).
+    odometry_scale: Literal["shared", "metric"] = "shared"
     local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
     # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
     # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
