@@ -14,7 +14,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
 - camera (--camera): the same window as depth + labels frames (160x120, 90 deg, pitch
   +-8 deg, 1.3 m high, 1% depth noise) rendered by the simulator in the map of the WHOLE
   log extruded into walls (sim.build_scene_from_floorplan), odometry drifting 2% of the
-  step per axis + 0.3 deg per step, localized at the default metric prior against the
+  step per axis + 0.3 deg per step, localized at the default metric prior (odometry metric: localizer.odometry_scale) against the
   same held-out map; its reference searches the localizer's final BEV wall points (and
   places each frame by its plane pose as the BEV fused it);
 - success (F3Loc): all of the last 10 frames within 1 m. A failure is attributed to "no
@@ -81,6 +81,7 @@ def laser_points(frame) -> np.ndarray:
     return _hits(frame, frame.T_odom_sensor)
 
 
+CAMERA_RIG = ["localizer.odometry_scale=metric"]
 CAMERA = SimSettings(camera_height=1.3, camera_height_jitter=0.0, max_pitch_deg=8.0, max_roll_deg=0.0, scale_error=0.0,
                      furniture_as_wall_prob=0.0, wall_dropout=0.0, odom_origin_range=50.0)
 
@@ -314,7 +315,9 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
     stop = start + length
     row = {"log": log, "start": start, "length": length, "seed": seed, "sensor": "camera" if camera else "laser"}
     if camera:
-        settings = load_settings(overrides=overrides).model_copy(update={"seed": seed})
+        # the simulated rig's odometry is metric (CAMERA.scale_error 0): only a monocular
+        # condition's depth is off in scale (localizer.odometry_scale); --set can say otherwise
+        settings = load_settings(overrides=[*CAMERA_RIG, *overrides]).model_copy(update={"seed": seed})
         seq = carmen_sequence(path, settings)
         floorplan = seq.floorplan_for(start, stop)
         truth = seq.ground_truth[start:stop]
