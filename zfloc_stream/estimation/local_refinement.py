@@ -9,6 +9,14 @@ a jump is another place, which only a round may propose), and explains at least 
 the hits as where it started. A refused step keeps the last accepted alignment; a new
 tracked mode starts a new chain from its own alignment. Settings: LocalizerSettings
 (`local_*`).
+
+Metric odometry (localizer.odometry_scale "metric", with a scale to estimate): a depth
+network's depth is off by a factor about each camera while the odometry is metric, so the
+mode's scale is the depth's, not the trajectory's. Each frame's hits are rescaled about its
+own camera by the mode's scale over estimator.scale_prior (frame_hits), and the chain fits
+an alignment at scale_prior to them: the trajectory maps at the plan's scale, and along a
+corridor, where the hits do not fix the position along it, the pose no longer slides by
+the depth's scale error of every metre walked.
 """
 
 from __future__ import annotations
