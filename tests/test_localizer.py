@@ -337,7 +337,7 @@ def test_frame_hits_rescale_about_the_camera_only_under_metric_odometry():
 
     mode = SimpleNamespace(id=1, alignment=Sim2(1.1, 0.3, (2.0, -1.0)))
     hits, camera = np.array([[3.0, 1.0], [1.0, 4.0]]), np.array([1.0, 1.0])
-    for odometry, scale_mode, expected in (("shared", "prior", hits), ("metric", "fixed", hits),
+    for odometry, scale_mode, expected in (("shared", "prior", hits), ("metric", "fixed", hits), ("metric", "free", hits),
                                            ("metric", "prior", camera + 1.1 / 1.25 * (hits - camera))):
         s = load_settings(overrides=[f"localizer.odometry_scale={odometry}", f"estimator.scale_mode={scale_mode}",
                                      "estimator.scale_prior=1.25"])

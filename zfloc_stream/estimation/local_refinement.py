@@ -10,7 +10,7 @@ the hits as where it started. A refused step keeps the last accepted alignment; 
 tracked mode starts a new chain from its own alignment. Settings: LocalizerSettings
 (`local_*`).
 
-Metric odometry (localizer.odometry_scale "metric", with a scale to estimate): a depth
+Metric odometry (localizer.odometry_scale "metric", estimator.scale_mode "prior"): a depth
 network's depth is off by a factor about each camera while the odometry is metric, so the
 mode's scale is the depth's, not the trajectory's. Each frame's hits are rescaled about its
 own camera by the mode's scale over estimator.scale_prior (frame_hits), and the chain fits
@@ -51,10 +51,11 @@ class LocalRefinement:
 
     @property
     def metric_odometry(self) -> bool:
-        """localizer.odometry_scale "metric" with a scale to estimate: the alignment's scale
-        is the depth's, the trajectory maps at the floorplan's expected scale (module
-        docstring)."""
-        return self.settings.odometry_scale == "metric" and self.estimator.scale_mode != "fixed"
+        """localizer.odometry_scale "metric" at a scale prior: the alignment's scale is the
+        depth's, the trajectory maps at estimator.scale_prior (module docstring). At a free
+        scale the plan's units are unknown too, so depth and trajectory share the one
+        scale; at a fixed scale there is none to split."""
+        return self.settings.odometry_scale == "metric" and self.estimator.scale_mode == "prior"
 
     def frame_hits(self, hits: np.ndarray, camera_xy, mode) -> np.ndarray:
         """A frame's wall hits as the reported alignment reads them: under metric odometry

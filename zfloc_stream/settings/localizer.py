@@ -48,8 +48,8 @@ class LocalizerSettings(Section):
     local_max_step: float = Field(0.2, gt=0, le=1000)  # m per fused frame since the last local refinement: a refinement that moves the recent hits farther is refused (drift is slow)
     local_max_points: int = Field(2000, ge=10, le=1_000_000)  # recent hits used (subsampled)
     local_every_k_frames: int = Field(0, ge=0, le=10_000)  # also refine locally every k fused frames between rounds (0: after rounds only)
-    # What scale the odometry's translations have, when the scale is estimated
-    # (estimator.scale_mode prior or free): "shared", one unknown scale for depth and
+    # What scale the odometry's translations have, at a scale prior (estimator.scale_mode
+    # prior; free and fixed scales are always shared): "shared", one unknown scale for depth and
     # odometry (a monocular reconstruction; the built-in scenes), so the alignment's scale
     # maps the trajectory too; "metric", the odometry is metric (VIO, wheels) and only the
     # depth may be off (a monocular depth network): the trajectory maps at
