@@ -68,8 +68,7 @@ class Localizer:
         self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
-        self._adopted_at = -1
-  # frame whose kidnap round was adopted last
+        self._adopted_at = -1  # frame whose kidnap round was adopted last
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:

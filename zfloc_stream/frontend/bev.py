@@ -50,8 +50,8 @@ from .wallmask import refine_wall_points, upright_rotation
 _SHIFT = 4  # cv2.fillPoly sub-cell precision: coordinates in 1/16 cell
 
 # Scan matching reads the wall grid on a crop around the frame's hits, widened by this many
-# times the largest correction allowed (scan_match.step_bounds): points moved by up to the largest correction still see the
-# walls they may match; a crop under SCAN_MATCH_MIN_CROP_CELLS on a side has no interior for
+# times the largest correction allowed (scan_match.step_bounds): points moved by up to that
+# correction still see the walls they may match; a crop under SCAN_MATCH_MIN_CROP_CELLS on a side has no interior for
 # the distance field's gradient, so the frame is fused uncorrected.
 SCAN_MATCH_CROP_MARGIN_SHIFTS = 2
 SCAN_MATCH_MIN_CROP_CELLS = 3

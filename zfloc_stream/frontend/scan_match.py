@@ -82,20 +82,23 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     theta = _best_rotation(grid.distance_field, grid.origin, resolution, points, refine.huber_delta,
                            refine.outlier_distance, max_angle, np.deg2rad(settings.scan_match_angle_step_deg))
     starts = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, theta, 1.0]][: 1 + (theta != 0.0)])
+    def cost(p: np.ndarray) -> float:  # the fit's robust cost of hits placed at p
+        return huber_cost(_residuals(grid, p), refine.huber_delta, refine.outlier_distance)
+
+    keep = 1.0 - settings.scan_match_min_gain  # a correction must bring the cost below this share
     models = refine_batch(grid, points, starts, refine, "fixed")
-    costs = [huber_cost(_residuals(grid, _moved(points, m)), refine.huber_delta, refine.outlier_distance) for m in models]
-    model = models[-1] if costs[-1] < (1.0 - settings.scan_match_min_gain) * costs[0] else models[0]
+    moved_by = [_moved(points, m) for m in models]
+    costs = [cost(p) for p in moved_by]
+    k = len(models) - 1 if costs[-1] < keep * costs[0] else 0
+    model, moved = models[k], moved_by[k]
     dt, dtheta = model[:2], float(model[2])
     if not np.isfinite(model).all() or np.hypot(*dt) > max_shift or abs(dtheta) > max_angle:
         return None
-    moved = _moved(points, model)
     # A step that fits the hits only a little better is fitting the grid's quantisation and
     # the range noise, not drift: taken, such steps would random-walk a perfect odometry
     # away. Drift of a few centimetres on hits that sit within a cell of their walls halves
     # the cost; noise fitting gains a few percent.
-    before, after = huber_cost(_residuals(grid, points), refine.huber_delta, refine.outlier_distance), huber_cost(
-        _residuals(grid, moved), refine.huber_delta, refine.outlier_distance)
-    if after > (1.0 - settings.scan_match_min_gain) * before:
+    if costs[k] > keep * cost(points):
         return None
     if _share_near(grid, moved, near) < _share_near(grid, points, near):
         return None
