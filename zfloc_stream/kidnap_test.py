@@ -82,17 +82,20 @@ class KidnapTest:
 
 
 def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,
-                 recent_hits: list[np.ndarray], sensor_xy) -> bool:
+                 recent_hits: list[np.ndarray], sensor_xy, old_hits: list[np.ndarray] | None = None) -> bool:
     """Is the alignment `found` another place than the tracked `old` (beyond the tracker's
     pose-jump gate, tracker.pose_jumped), explaining the recent frames' wall hits as the
     monitor wants them explained (against the old mode's usual share) and more of them
     than the old place? A short stretch of corridor alone fits many places along it: the
-    test's bank can single one out on thin evidence, which these hits then refute."""
+    test's bank can single one out on thin evidence, which these hits then refute.
+    old_hits: the same frames' hits as the old (reported) alignment reads them, when that
+    differs (LocalRefinement.frame_hits under metric odometry); default recent_hits."""
     if not tracker.pose_jumped(old, found, sensor_xy, old_mode):
         return False
     hits = [h for h in recent_hits if len(h)]
     if not hits:
         return False
     hits = np.concatenate(hits)
+    read_by_old = hits if old_hits is None else np.concatenate([h for h in old_hits if len(h)])
     share = monitor.share(found, hits)
-    return share is not None and monitor.explains(share, monitor.usual_share(old_mode.id)) and share > monitor.share(old, hits)
+    return share is not None and monitor.explains(share, monitor.usual_share(old_mode.id)) and share > monitor.share(old, read_by_old)
