@@ -28,6 +28,7 @@ from eval_real import DATA, LOGS, drift_overrides  # noqa: E402
 
 from zfloc_stream.config import load_settings  # noqa: E402
 from zfloc_stream.datasets.carmen import carmen_sequence  # noqa: E402
+from zfloc_stream.errors import ZflocError  # noqa: E402
 from zfloc_stream.frontend.bev import RollingBEV, plane_pose  # noqa: E402
 from zfloc_stream.sim2 import wrap_angle  # noqa: E402
 
@@ -75,11 +76,20 @@ def main(argv=None) -> int:
     parser.add_argument("--drift", type=float, action="append", help="odometry drift multiplier (repeatable; default 1 and 3)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings override")
     args = parser.parse_args(argv)
+    logs = [name for name in args.logs.split(",") if name]
+    missing = [name for name in logs if not (DATA / f"{name}-corrected.log.gz").exists()]
+    if missing or not logs:
+        parser.error(f"no Carmen log for {', '.join(missing) or '(none named)'} in {DATA} (have: {', '.join(LOGS)})")
+    try:  # a bad --set or --drift is the settings' one error line, before any output
+        for drift in args.drift or [1.0, 3.0]:
+            load_settings(overrides=drift_overrides(drift) + args.set)
+    except ZflocError as err:
+        parser.error(str(err))
     print("step errors: translation cm (median, 90%) | heading deg (median, 90%, share over 2 deg)\n")
     print("| log | drift | scans | odometry | after scan matching | fusion ms (median / 99%) |")
     print("|---|---|---|---|---|---|")
     for drift in args.drift or [1.0, 3.0]:
-        for log in [s for s in args.logs.split(",") if s]:
+        for log in logs:
             print(run(log, drift, args.set), flush=True)
     return 0
 
