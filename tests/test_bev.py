@@ -395,3 +395,29 @@ def test_a_frame_whose_walls_cut_through_what_older_frames_saw_open_contradicts_
     assert bev.last_contradiction == 0.0
     bev.add(laser(4.0, 3.0, 0.1, box=smaller, t=6))
     assert bev.last_contradiction > 0.9
+
+
+def test_grid_cell_passes_count_points_per_cell_and_look_around_open_cells():
+    """ScrollingGrid.unique_flat: the cells (ascending flat index) holding at least
+    min_count of the points, points outside the grid ignored, whatever the call before.
+    open_without_wall_near: of the points on seen cells, those on open cells with no
+    occupied cell within reach (the window clipped at the grid's edge)."""
+    from zfloc_stream.frontend.scrolling_grid import ScrollingGrid
+
+    g = ScrollingGrid(10, 1.0)
+    g.centre_on(np.array([5.5, 5.5]), 0)  # cell (0, 0) is x, y in [0, 1)
+    pts = np.array([[2.5, 1.5], [2.2, 1.9], [2.9, 1.1], [7.5, 3.5], [7.1, 3.2], [0.5, 0.5], [-0.5, 0.5], [10.5, 9.5]])
+    assert g.unique_flat(pts).tolist() == [0, 12, 37]
+    assert g.unique_flat(pts, min_count=2).tolist() == [12, 37]
+    assert g.unique_flat(pts, min_count=3).tolist() == [12]
+    assert g.unique_flat(pts[:0]).tolist() == []
+    assert g.unique_flat(pts, min_count=2).tolist() == [12, 37]  # the scratch counts were reset
+
+    g.seen[:, :] = 1
+    g.logodds[:, :] = -1.0  # open everywhere
+    g.logodds[9, 9] = 1.0  # one occupied corner cell
+    hits = np.array([[0.5, 0.5], [8.5, 8.5], [9.5, 7.5], [5.5, 5.5], [20.0, 20.0]])
+    assert g.open_without_wall_near(hits, -0.3, 0.0, reach=2, min_known=1) == (4, 2)  # (8, 8) and (7, 9) see the corner
+    assert g.open_without_wall_near(hits, -0.3, 0.0, reach=2, min_known=5) == (0, 0)  # too few on seen cells
+    g.seen[0, 0] = 0
+    assert g.open_without_wall_near(hits, -0.3, 0.0, reach=1, min_known=1) == (3, 2)

@@ -358,22 +358,11 @@ class RollingBEV:
         where they saw open space, no occupied cell within localizer.monitor_distance: a
         sensor carried off sees walls cut through what it saw before, one walking on does
         not (0 with fewer than localizer.monitor_min_points such hits)."""
-        g = self.grid
-        row, col = g.cells(wall_hits)
-        known = g.seen[row, col] > 0
-        if known.sum() < self.settings.localizer.monitor_min_points:
-            return 0.0
-        row, col = row[known], col[known]
-        free = g.logodds[row, col] < self.settings.bev.free_threshold
-        if not free.any():
-            return 0.0
-        # only the hits on free cells need their neighbourhood: one gather for all of them
-        reach = max(1, int(round(self.settings.localizer.monitor_distance / g.res)))
-        offsets = np.arange(-reach, reach + 1)
-        rows = np.clip(row[free, None, None] + offsets[None, :, None], 0, g.n - 1)
-        cols = np.clip(col[free, None, None] + offsets[None, None, :], 0, g.n - 1)
-        near = (g.logodds[rows, cols] > self.settings.bev.occupied_threshold).any(axis=(1, 2))
-        return float((~near).sum() / len(row))
+        lc = self.settings.localizer
+        known, lonely = self.grid.open_without_wall_near(
+            wall_hits, self.settings.bev.free_threshold, self.settings.bev.occupied_threshold,
+            max(1, int(round(lc.monitor_distance / self.grid.res))), lc.monitor_min_points)
+        return lonely / known if known else 0.0
 
     # ------------------------------------------------------------------------------
     # the shared update

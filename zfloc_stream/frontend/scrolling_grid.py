@@ -2,11 +2,17 @@
 indices, which scrolls (content shifted, the part leaving dropped) when the sensor leaves a
 box around its centre, so the cost of an update or a scroll never grows with session
 length. Per cell: log-odds occupancy, wall evidence, hit count and the stamp of the frame
-that last hit or freed it."""
+that last hit or freed it. The per-point passes of a fusion (distinct cells, a
+neighbourhood test) are compiled: a frame's ~20,000 points otherwise cost a sort or a
+gather of 169 cells each, in the stream's time."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ..numba_support import njit
 
 
 class ScrollingGrid:
@@ -21,6 +27,7 @@ class ScrollingGrid:
         self.hits = np.zeros((n, n), dtype=np.uint16)
         self.seen = np.zeros((n, n), dtype=np.int32)  # stamp of the last frame that hit or freed the cell (0: never)
         self.stamp = 0  # frames fused into this grid
+        self._count = np.zeros(n * n, dtype=np.int32)  # scratch of unique_flat, all zero between calls
 
     def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
         cx, cy = (int(np.floor(v / self.res)) for v in xy)
@@ -45,20 +52,79 @@ class ScrollingGrid:
         for a in (self.logodds, self.wall, self.hits, self.seen):
             a[old] = 0
 
-    def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(row, col) of the points inside the grid."""
-        col = np.floor(xy[:, 0] / self.res).astype(np.int64) - self.ix0
-        row = np.floor(xy[:, 1] / self.res).astype(np.int64) - self.iy0
-        inside = (row >= 0) & (row < self.n) & (col >= 0) & (col < self.n)
-        return row[inside], col[inside]
-
     def unique_flat(self, xy: np.ndarray, min_count: int = 1) -> np.ndarray:
-        """Flat indices of the cells holding at least min_count of the points."""
-        row, col = self.cells(xy)
-        if min_count <= 1:
-            return np.unique(row * self.n + col)
-        flat, counts = np.unique(row * self.n + col, return_counts=True)
-        return flat[counts >= min_count]
+        """Flat indices (ascending) of the cells holding at least min_count of the points."""
+        return _unique_cells(np.ascontiguousarray(xy, dtype=float), self.res, self.ix0, self.iy0, self.n,
+                             max(int(min_count), 1), self._count)
+
+    def open_without_wall_near(self, xy: np.ndarray, free_below: float, occupied_above: float, reach: int,
+                               min_known: int) -> tuple[int, int]:
+        """(cells some frame saw, hits among them on an open cell, logodds < free_below, with
+        no cell above occupied_above within reach cells, a square): both 0 when fewer than
+        min_known of the points land on seen cells."""
+        return _open_without_wall_near(np.ascontiguousarray(xy, dtype=float), self.res, self.ix0, self.iy0,
+                                       self.logodds, self.seen, np.float32(free_below), np.float32(occupied_above),
+                                       int(reach), int(min_known))
+
+
+@njit
+def _cell(x, y, res, ix0, iy0, n):
+    """(row, col) of a point, col -1 outside (cells' arithmetic: floor(v / res) - origin)."""
+    col = np.int64(math.floor(x / res)) - ix0
+    row = np.int64(math.floor(y / res)) - iy0
+    if row < 0 or row >= n or col < 0 or col >= n:
+        return 0, -1
+    return row, col
+
+
+@njit
+def _unique_cells(xy, res, ix0, iy0, n, min_count, count):
+    """np.unique of the flat cells of xy's inside points, kept where they hold min_count or
+    more; count (n * n, zero) is scratch, zero again on return."""
+    flat = np.empty(len(xy), dtype=np.int64)
+    m = 0
+    for i in range(len(xy)):
+        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
+        if col < 0:
+            continue
+        f = row * n + col
+        count[f] += 1
+        if count[f] == min_count:  # each cell once, when it reaches min_count
+            flat[m] = f
+            m += 1
+    for i in range(len(xy)):  # reset the scratch
+        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
+        if col >= 0:
+            count[row * n + col] = 0
+    return np.sort(flat[:m])
+
+
+@njit
+def _open_without_wall_near(xy, res, ix0, iy0, logodds, seen, free_below, occupied_above, reach, min_known):
+    n = logodds.shape[0]
+    known = 0
+    for i in range(len(xy)):
+        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
+        if col >= 0 and seen[row, col] > 0:
+            known += 1
+    if known < min_known:
+        return 0, 0
+    lonely = 0
+    for i in range(len(xy)):
+        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
+        if col < 0 or seen[row, col] <= 0 or not logodds[row, col] < free_below:
+            continue
+        near = False  # the window clipped to the grid, as a clipped index repeats the edge
+        for r in range(max(row - reach, 0), min(row + reach, n - 1) + 1):
+            for c in range(max(col - reach, 0), min(col + reach, n - 1) + 1):
+                if logodds[r, c] > occupied_above:
+                    near = True
+                    break
+            if near:
+                break
+        if not near:
+            lonely += 1
+    return known, lonely
 
 
 def shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
