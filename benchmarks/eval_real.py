@@ -32,6 +32,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
     python benchmarks/eval_real.py --drift-free --logs belgioioso,orebro   # what the maps allow
     python benchmarks/eval_real.py --plan-style --camera --windows 2   # against the maps drawn as plans
     python benchmarks/eval_real.py --plan-style two-face                # plans with both faces of each wall
+    python benchmarks/eval_real.py --plan-style two-face-centred       # both faces 0.1 m about each seen wall
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from functools import lru_cache
 
 from zfloc_stream.config import load_settings
 from zfloc_stream.datasets.carmen import carmen_sequence, load_log
-from zfloc_stream.mapping import map_from_log
+from zfloc_stream.mapping import log_odds_map, map_from_log
 from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.estimate import STATUSES
@@ -326,7 +327,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
             frames = monocular_frames(frames, conditions, seed, log, start)
         if plan_style:
             row.update(plan_window(floorplan, frames, settings, true_hits(seq.frames(start, stop))))
-            floorplan = plan_of(floorplan, settings, plan_style)
+            floorplan = plan_of(floorplan, settings, plan_style, log, start, stop)
         result, localizer = localize_frames(floorplan, frames, settings)
         row.update(result, coverage=map_coverage(floorplan, true_hits(seq.frames(start, stop))))
         if reference:
@@ -341,7 +342,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
     settings, floorplan, frames = laser_window(log, start, length, overrides, seed)
     if plan_style:
         row.update(plan_window(floorplan, frames, settings, true_hits(frames)))
-        floorplan = plan_of(floorplan, settings, plan_style)
+        floorplan = plan_of(floorplan, settings, plan_style, log, start, stop)
     row["coverage"] = map_coverage(floorplan, true_hits(frames))
     if localize:
         result, _ = localize_frames(floorplan, frames, settings)
@@ -354,19 +355,35 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
 
 
 # --- plan style: the held-out map redrawn as an architect's plan (issue 30) ---------------
-PLAN_STYLES = ("one-face", "two-face")
+# two-face: each wall as both faces, the one the sensor saw where the map shows it and the
+# wall's body behind it; two-face-centred: both faces thickness/2 about the map's wall line,
+# so every face toward a room lies 0.1 m inside the open space the sensor saw (a plan off by
+# that much everywhere: the variant measured before 2026-12-04)
+PLAN_STYLES = ("one-face", "two-face", "two-face-centred")
 PLAN_WALL_THICKNESS = 0.2  # m, two-face plans: each wall drawn as its faces this far apart
 PLAN_COVERAGE = 0.7  # windows whose plan covers at least this share of their hits
 
 
-def plan_of(floorplan, settings, style: str):
-    """The held-out map redrawn as a plan (zfloc_stream.plan_drawing), written as a DXF in
-    metres and loaded through the vector path, as a user's `run --floorplan plan.dxf`."""
+def plan_of(floorplan, settings, style: str, log: str, start: int, stop: int):
+    """The held-out map of window [start, stop) of a log redrawn as a plan
+    (zfloc_stream.plan_drawing), written as a DXF in metres and loaded through the vector
+    path, as a user's `run --floorplan plan.dxf`."""
     segments = draw_plan(floorplan)
     if style == "two-face":
+        segments = two_faces(segments, PLAN_WALL_THICKNESS, heldout_free(log, start, stop, settings))
+    elif style == "two-face-centred":
         segments = two_faces(segments, PLAN_WALL_THICKNESS)
     with tempfile.TemporaryDirectory() as tmp:
         return load_vector_floorplan(write_plan_dxf(segments, Path(tmp) / f"plan-{style}.dxf"), settings)
+
+
+def heldout_free(log: str, start: int, stop: int, settings):
+    """(free cells, origin, resolution) of the held-out map of a window: what the scans
+    outside it saw open (mapping.log_odds_map, the grid carmen_sequence's map thresholds)."""
+    margin = settings.datasets.carmen.heldout_margin
+    logodds, origin, res = log_odds_map(load_log(DATA / f"{log}-corrected.log.gz", settings),
+                                        [(start - margin, stop + margin)], settings)
+    return logodds < 0, origin, res
 
 
 def plan_window(raster, frames, settings, hits: np.ndarray) -> dict:
@@ -601,7 +618,8 @@ def main(argv=None) -> int:
                         help="only the exact search on the laser windows placed by their true poses (what the held-out maps allow), then stop")
     parser.add_argument("--plan-style", nargs="?", const="one-face", choices=PLAN_STYLES,
                         help="localize against each held-out map redrawn as an architect's DXF plan (one line per wall, "
-                             "or two-face: both faces of each wall), beside the raster map on the same windows")
+                             "two-face: both faces of each wall, the wall behind the face the sensor saw; two-face-centred: "
+                             "faces 0.1 m either side of it), beside the raster map on the same windows")
     add_condition_options(parser)
     args = parser.parse_args(argv)
     conditions = parse_conditions(parser, args)

@@ -81,7 +81,7 @@ def stage_row(floorplan, localizer, frames, settings) -> dict:
 
 def diagnose(log: str, start: int, length: int, style: str, overrides: list[str]) -> dict:
     settings, raster, frames = eval_real.laser_window(log, start, length, overrides)
-    plan = eval_real.plan_of(raster, settings, style)
+    plan = eval_real.plan_of(raster, settings, style, log, start, start + length)
     out = {"log": log, "start": start, "length": length}
     for name, fp in (("plan", plan), ("raster", raster)):
         result, localizer = eval_real.localize_frames(fp, frames, settings)

@@ -47,3 +47,24 @@ def test_two_face_walls_are_offset_both_ways():
     assert faces.shape == (4, 2, 2)
     assert np.allclose(sorted(faces[[0, 2], 0, 1]), [-0.1, 0.1])
     assert np.allclose(sorted(faces[[1, 3], 0, 0]), [0.9, 1.1])
+
+
+def test_two_faces_keep_the_seen_surface_and_put_the_wall_behind_it():
+    """With the map's free cells: a wall seen from one side keeps its line as that face and
+    gets the other face behind it (never inside the open space the sensor saw); a wall seen
+    from both sides is one map cell thick; a wall seen from neither side stays centred."""
+    res, origin = 0.05, np.array([0.0, 0.0])
+    free = np.zeros((120, 120), dtype=bool)  # 6 x 6 m
+    free[:40, :] = True  # open below y = 2 m: the wall at y = 2 is seen from below only
+    free[40:, 80:100] = True  # a corridor x in [4, 5] m above the wall
+    segs = np.array([[[0.5, 2.0], [3.5, 2.0]],  # y = 2: seen from below only
+                     [[4.0, 3.0], [4.0, 5.5]],  # x = 4: free on +x only (the corridor), above y = 2
+                     [[1.0, 4.0], [3.0, 4.0]]])  # y = 4, x in [1, 3]: unknown on both sides
+    faces = two_faces(segs, 0.2, (free, origin, res))
+    assert faces.shape == (6, 2, 2)
+    assert np.allclose(sorted(faces[[0, 3], 0, 1]), [2.0, 2.2])  # the room's face stays, the wall goes up
+    assert np.allclose(sorted(faces[[1, 4], 0, 0]), [3.8, 4.0])  # the corridor's face stays, the wall goes to -x
+    assert np.allclose(sorted(faces[[2, 5], 0, 1]), [3.9, 4.1])  # seen from neither side: centred
+    free[40:, :80] = True  # now the wall at y = 2 is seen from both sides
+    faces = two_faces(segs, 0.2, (free, origin, res))
+    assert np.allclose(sorted(faces[[0, 3], 0, 1]), [1.975, 2.025])

@@ -101,6 +101,17 @@ def map_from_log(log, exclude: Seq[tuple[int, int]] = (), settings: Settings | N
     from .floorplan import Floorplan
 
     settings = settings if settings is not None else Settings()
+    logodds, origin, res = log_odds_map(log, exclude, settings, resolution)
+    name = f"{getattr(log, 'path', 'log')}".rsplit("/", 1)[-1]
+    return Floorplan.from_occupancy(logodds > settings.datasets.mapping.occupied_threshold, res, origin,
+                                    settings=settings, name=name)
+
+
+def log_odds_map(log, exclude: Seq[tuple[int, int]] = (), settings: Settings | None = None,
+                 resolution: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(log-odds grid, origin, resolution) that map_from_log thresholds, cropped to its
+    walls (+ padding) as the floorplan is: cells below 0 are free space the scans saw."""
+    settings = settings if settings is not None else Settings()
     cfg = settings.datasets.mapping
     if resolution is not None:
         if not (np.isfinite(resolution) and resolution > 0):
@@ -126,7 +137,5 @@ def map_from_log(log, exclude: Seq[tuple[int, int]] = (), settings: Settings | N
     pad = int(np.ceil(cfg.padding / cfg.resolution))
     rows, cols = np.nonzero(occupied)
     r0, c0 = max(rows.min() - pad, 0), max(cols.min() - pad, 0)
-    occupied = occupied[r0 : rows.max() + pad + 1, c0 : cols.max() + pad + 1]
-    origin = origin + cfg.resolution * np.array([c0, r0])
-    name = f"{getattr(log, 'path', 'log')}".rsplit("/", 1)[-1]
-    return Floorplan.from_occupancy(occupied, cfg.resolution, origin, settings=settings, name=name)
+    logodds = logodds[r0 : rows.max() + pad + 1, c0 : cols.max() + pad + 1]
+    return logodds, origin + cfg.resolution * np.array([c0, r0]), cfg.resolution

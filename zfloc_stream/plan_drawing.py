@@ -2,7 +2,7 @@
 
     segments = draw_plan(floorplan)                      # (N, 2, 2) metres, one line per wall
     write_plan_dxf(segments, "plan.dxf")                 # LINEs in metres, loaded by the vector path
-    write_plan_dxf(two_faces(segments, 0.2), "plan.dxf") # walls drawn as both their faces
+    write_plan_dxf(two_faces(segments, 0.2, (free, origin, res)), "plan.dxf")  # both faces of each wall
 
 What a plan holds and a map made by the sensor does not: walls only. So the map's wall
 cells are cleaned of blobs smaller than `min_blob` (furniture, people, scan noise), wall
@@ -80,14 +80,50 @@ def draw_plan(floorplan: Floorplan, min_length: float = 0.5, min_blob: float = 0
     return deduplicate_lines(LineSet.from_endpoints(segs), dedup).endpoints.copy()
 
 
-def two_faces(segments: np.ndarray, thickness: float) -> np.ndarray:
-    """Each wall drawn as its two faces, thickness/2 either side of the centre line (as
-    plans draw walls): (2N, 2, 2)."""
+def two_faces(segments: np.ndarray, thickness: float, seen_free=None) -> np.ndarray:
+    """Each wall drawn as its two faces, thickness apart, as plans draw walls: (2N, 2, 2).
+
+    A segment drawn from a map lies on the surface the sensor saw. seen_free = (free,
+    origin, resolution), the map's free cells (bool, row 0 at the smallest y): a wall seen
+    from one side (half the probes 0.1-0.3 m off it land on free cells) keeps its segment
+    as that face and gets its other face thickness behind it, on the side the sensor never
+    saw; a wall seen from both sides, which the map shows as one line, is thin: faces one
+    map cell apart. Without seen_free, or for a wall seen from neither side, the faces lie
+    thickness/2 either side of the segment: the face toward a room then lies inside the
+    open space the sensor saw ("two-face-centred" plans)."""
     segs = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
     d = segs[:, 1] - segs[:, 0]
     n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
-    shift = 0.5 * thickness * n[:, None, :]
-    return np.concatenate([segs + shift, segs - shift])
+    plus_face = np.full(len(segs), 0.5 * thickness)  # offset of the face on the +n side
+    minus_face = np.full(len(segs), -0.5 * thickness)  # and of the face on the -n side
+    if seen_free is not None and len(segs):
+        free, origin, res = seen_free
+        plus, minus = (_free_share(segs, sign * n, free, np.asarray(origin, dtype=float), res) >= 0.5 for sign in (1, -1))
+        plus_face[plus & ~minus], minus_face[plus & ~minus] = 0.0, -thickness
+        plus_face[minus & ~plus], minus_face[minus & ~plus] = thickness, 0.0
+        plus_face[plus & minus], minus_face[plus & minus] = 0.5 * res, -0.5 * res
+    return np.concatenate([segs + plus_face[:, None, None] * n[:, None, :], segs + minus_face[:, None, None] * n[:, None, :]])
+
+
+def _free_share(segs: np.ndarray, n: np.ndarray, free: np.ndarray, origin: np.ndarray, res: float,
+                depths=(0.1, 0.2, 0.3), spacing: float = 0.1) -> np.ndarray:
+    """Per segment, the share of probes `depths` metres off its middle 80% (every `spacing`
+    m) along n that land on free cells."""
+    length = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
+    count = np.maximum(np.ceil(0.8 * length / spacing).astype(np.int64), 1)
+    owner = np.repeat(np.arange(len(segs)), count)
+    t = 0.1 + 0.8 * (np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count) + 0.5) / np.repeat(count, count)
+    along = segs[owner, 0] + t[:, None] * (segs[owner, 1] - segs[owner, 0])
+    hits = np.zeros(len(segs))
+    for depth in depths:
+        p = along + depth * n[owner]
+        col = np.floor((p[:, 0] - origin[0]) / res).astype(np.int64)
+        row = np.floor((p[:, 1] - origin[1]) / res).astype(np.int64)
+        inside = (row >= 0) & (row < free.shape[0]) & (col >= 0) & (col < free.shape[1])
+        on = np.zeros(len(p), dtype=bool)
+        on[inside] = free[row[inside], col[inside]]
+        hits += np.bincount(owner, weights=on, minlength=len(segs))
+    return hits / (len(depths) * count)
 
 
 def write_plan_dxf(segments: np.ndarray, path) -> Path:
