@@ -20,7 +20,7 @@ def fake_rounds(monkeypatch):
     with an observation unless the job's snapshot says "skip"."""
     ran = []
 
-    def run(floorplan, settings, job, beside_stream=False):
+    def run(floorplan, settings, job):
         ran.append((job.index, threading.current_thread() is threading.main_thread()))
         observation = None if job.snapshot == "skip" else object()
         return RoundOutcome(job.index, observation, None, timings={"primitives": 0.001})

@@ -65,7 +65,6 @@ def test_ranges_and_resolve():
     assert threads.resolve(5) == 5
     cores = threads.available_cores()
     assert threads.resolve(0) == max(1, min(threads.AUTO_MAX, cores))
-    assert threads.resolve(0, beside_stream=True) == max(1, min(threads.AUTO_MAX, cores - 1))
 
 
 def test_bad_thread_count_is_a_config_error():

@@ -73,12 +73,11 @@ class ScheduledRound:
     outcome: RoundOutcome | Future | None = None
 
 
-def run_round(floorplan, settings: Settings, job: RoundJob, beside_stream: bool = False) -> RoundOutcome:
+def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     """Primitives + estimation of one round: a pure function of its inputs, so it gives the
     same bits on the caller's thread, a worker thread or a worker process. Afterwards the
-    round's freed temporaries go back to the OS (localizer.release_memory). beside_stream:
-    the round runs on a worker (estimator.threads' auto leaves the stream's core alone)."""
-    with threads.limit(threads.resolve(settings.estimator.threads, beside_stream=beside_stream)):
+    round's freed temporaries go back to the OS (localizer.release_memory)."""
+    with threads.limit(threads.resolve(settings.estimator.threads)):
         out = _compute_round(floorplan, settings, job)
     if settings.localizer.release_memory:
         release_free_heap()
@@ -140,7 +139,7 @@ def _init_process(floorplan, settings: Settings) -> None:
 
 
 def _process_round(job: RoundJob) -> RoundOutcome:
-    return run_round(*_process_state, job, beside_stream=True)
+    return run_round(*_process_state, job)
 
 
 class RoundScheduler:
@@ -238,4 +237,4 @@ class RoundScheduler:
     def _task(self, job: RoundJob) -> tuple:
         if self.settings.localizer.worker == "process":
             return _process_round, job
-        return run_round, self.floorplan, self.settings, job, True
+        return run_round, self.floorplan, self.settings, job

@@ -46,14 +46,13 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def resolve(threads: int, *, beside_stream: bool = False) -> int:
+def resolve(threads: int) -> int:
     """estimator.threads as a count: 0 (auto) is every core this process may use, up to
-    AUTO_MAX, less the one the stream's fusion runs on when the round runs beside it
-    (beside_stream: a pipelined round); any other value is taken as given."""
+    AUTO_MAX, whether the round runs in a push or on the worker beside the stream (the
+    stream's few milliseconds per frame share the cores); any other value is taken as given."""
     if threads > 0:
         return int(threads)
-    cores = available_cores() - (1 if beside_stream else 0)
-    return max(1, min(AUTO_MAX, cores))
+    return max(1, min(AUTO_MAX, available_cores()))
 
 
 @contextlib.contextmanager

@@ -172,6 +172,7 @@ class EstimatorSettings(Section):
     # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this
-    # process may use (at most threads.AUTO_MAX), less one for the stream when the round
-    # runs on the worker beside it (localizer.pipeline: online once a pose exists, pipelined).
+    # process may use (at most threads.AUTO_MAX), on the worker beside the stream too: a
+    # push needs a few ms per frame, and a round kept off the stream's core outlasted a
+    # 10 Hz frame interval, so the next push waited for it (docs/performance.md).
     threads: int = Field(0, ge=0, le=256)
