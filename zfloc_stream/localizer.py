@@ -217,10 +217,9 @@ class Localizer:
             self.last_observation, self.last_result = outcome.observation, outcome.result
         old_alignment = None if old is None else self.local.alignment_of_mode(old)
         # the old place is judged as it is reported (its hits rescaled under metric odometry)
-        old_hits = [self.local.frame_hits(h, c, old) for h, c in zip(self._recent_hits, self._recent_cameras)]
         verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
             found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2],
-            old_hits))
+            [self.local.frame_hits(h, c, old) for h, c in zip(self._recent_hits, self._recent_cameras)]))
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
             self.kidnaps_found += 1

@@ -31,13 +31,20 @@ from .primitives import deduplicate_lines
 from .vector_floorplan import merge_collinear
 
 
+def _samples(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner, k): count[i] samples of segment i, each with its segment and its index
+    0..count[i]-1 along it."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
+
+
 def _support(walls: np.ndarray, cols_rows: np.ndarray) -> np.ndarray:
     """(N,) share of each pixel segment's points (one per pixel) on or next to a wall pixel."""
     near = ndimage.binary_dilation(walls, structure=np.ones((3, 3), dtype=bool))
     length = np.linalg.norm(cols_rows[:, 1] - cols_rows[:, 0], axis=1)
     count = np.ceil(length).astype(np.int64) + 1
-    owner = np.repeat(np.arange(len(cols_rows)), count)
-    t = (np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)) / np.repeat(np.maximum(count - 1, 1), count)
+    owner, k = _samples(count)
+    t = k / np.repeat(np.maximum(count - 1, 1), count)
     p = np.rint(cols_rows[owner, 0] + t[:, None] * (cols_rows[owner, 1] - cols_rows[owner, 0])).astype(np.int64)
     on = near[np.clip(p[:, 1], 0, walls.shape[0] - 1), np.clip(p[:, 0], 0, walls.shape[1] - 1)]
     return np.bincount(owner, weights=on, minlength=len(cols_rows)) / count
@@ -111,8 +118,8 @@ def _free_share(segs: np.ndarray, n: np.ndarray, free: np.ndarray, origin: np.nd
     m) along n that land on free cells."""
     length = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
     count = np.maximum(np.ceil(0.8 * length / spacing).astype(np.int64), 1)
-    owner = np.repeat(np.arange(len(segs)), count)
-    t = 0.1 + 0.8 * (np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count) + 0.5) / np.repeat(count, count)
+    owner, k = _samples(count)
+    t = 0.1 + 0.8 * (k + 0.5) / np.repeat(count, count)
     along = segs[owner, 0] + t[:, None] * (segs[owner, 1] - segs[owner, 0])
     hits = np.zeros(len(segs))
     for depth in depths:

@@ -27,6 +27,7 @@ import numpy as np
 from ..config import BevSettings, RefineSettings
 from ..field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
 from ..numba_support import njit
+from ..sim2 import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ def step_bounds(last_odometry, odometry, settings: BevSettings) -> tuple[float, 
     if last_odometry is None:
         return shift, angle
     step = float(np.hypot(odometry[0] - last_odometry[0], odometry[1] - last_odometry[1]))
-    turn = abs(float(np.angle(np.exp(1j * (odometry[2] - last_odometry[2])))))
+    turn = abs(float(wrap_angle(odometry[2] - last_odometry[2])))
     return shift + settings.scan_match_shift_per_step * step, angle + settings.scan_match_angle_per_turn * turn
 
 
@@ -82,6 +83,7 @@ def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float
     theta = _best_rotation(grid.distance_field, grid.origin, resolution, points, refine.huber_delta,
                            refine.outlier_distance, max_angle, np.deg2rad(settings.scan_match_angle_step_deg))
     starts = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, theta, 1.0]][: 1 + (theta != 0.0)])
+
     def cost(p: np.ndarray) -> float:  # the fit's robust cost of hits placed at p
         return huber_cost(_residuals(grid, p), refine.huber_delta, refine.outlier_distance)
 

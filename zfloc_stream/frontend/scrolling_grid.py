@@ -81,38 +81,41 @@ def _cell(x, y, res, ix0, iy0, n):
 def _unique_cells(xy, res, ix0, iy0, n, min_count, count):
     """np.unique of the flat cells of xy's inside points, kept where they hold min_count or
     more; count (n * n, zero) is scratch, zero again on return."""
+    touched = np.empty(len(xy), dtype=np.int64)  # the inside points' cells, to reset the scratch
     flat = np.empty(len(xy), dtype=np.int64)
-    m = 0
+    k = m = 0
     for i in range(len(xy)):
         row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
         if col < 0:
             continue
         f = row * n + col
+        touched[k] = f
+        k += 1
         count[f] += 1
         if count[f] == min_count:  # each cell once, when it reaches min_count
             flat[m] = f
             m += 1
-    for i in range(len(xy)):  # reset the scratch
-        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
-        if col >= 0:
-            count[row * n + col] = 0
+    count[touched[:k]] = 0
     return np.sort(flat[:m])
 
 
 @njit
 def _open_without_wall_near(xy, res, ix0, iy0, logodds, seen, free_below, occupied_above, reach, min_known):
     n = logodds.shape[0]
+    rows = np.empty(len(xy), dtype=np.int64)  # the cells of the points on seen cells
+    cols = np.empty(len(xy), dtype=np.int64)
     known = 0
     for i in range(len(xy)):
         row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
         if col >= 0 and seen[row, col] > 0:
+            rows[known], cols[known] = row, col
             known += 1
     if known < min_known:
         return 0, 0
     lonely = 0
-    for i in range(len(xy)):
-        row, col = _cell(xy[i, 0], xy[i, 1], res, ix0, iy0, n)
-        if col < 0 or seen[row, col] <= 0 or not logodds[row, col] < free_below:
+    for i in range(known):
+        row, col = rows[i], cols[i]
+        if not logodds[row, col] < free_below:
             continue
         near = False  # the window clipped to the grid, as a clipped index repeats the edge
         for r in range(max(row - reach, 0), min(row + reach, n - 1) + 1):
