@@ -92,3 +92,23 @@ def test_one_evaluation_returns_the_start_wrapped(scene):
     out = refine_batch(face, points, models, RefineSettings(max_evaluations=1), "free")
     assert np.allclose(out[:, [0, 1, 3]], models[:, [0, 1, 3]], rtol=0, atol=1e-12)
     assert np.allclose(out[:, 2], (models[:, 2] + np.pi) % (2 * np.pi) - np.pi, rtol=0, atol=1e-12)
+
+
+def test_clutter_the_plan_lacks_pulls_a_plain_huber_fit_off_the_truth_but_not_the_default_one(scene):
+    """A plan draws walls only: BEV points of furniture 0.6-1.5 m from any wall have nothing
+    to match. With the plain Huber loss (outlier_distance 0) each still pulls, and the fit
+    started at the truth walks off it; with the default truncated loss they carry no
+    weight and the truth stays put (docs/plans.md: orebro 0 #15 on a two-face plan)."""
+    fp, face, points = scene
+    plan_points = TRUTH.apply(points)
+    rng = np.random.default_rng(0)
+    candidates = rng.uniform(plan_points.min(axis=0), plan_points.max(axis=0), size=(20000, 2))
+    d = fp.distance(candidates)
+    # furniture on one side of the room, half as many points as the walls give
+    furniture = candidates[(d > 0.6) & (d < 1.5) & (candidates[:, 0] > np.median(plan_points[:, 0]))][: len(points) // 2]
+    cluttered = np.concatenate([points, TRUTH.inverse().apply(furniture)])
+    plain = refine_batch(face, cluttered, TRUE_ROW[None], RefineSettings(outlier_distance=0.0), "fixed")[0]
+    default = refine_batch(face, cluttered, TRUE_ROW[None], RefineSettings(), "fixed")[0]
+    assert RefineSettings().outlier_distance == 0.5
+    assert np.hypot(*(plain[:2] - TRUE_ROW[:2])) > 0.05
+    assert np.hypot(*(default[:2] - TRUE_ROW[:2])) < 0.01 and abs(default[2] - TRUE_ROW[2]) < 1e-3
