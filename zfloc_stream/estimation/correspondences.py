@@ -124,6 +124,16 @@ def _circle_pairs(circles: CircleSet, min_distance: float) -> tuple[np.ndarray, 
 # --------------------------------------------------------------------------------------
 
 
+def compact_rows(rows: np.ndarray) -> np.ndarray:
+    """A tuple table (rows of line indices) in the smallest unsigned integer type that
+    holds its indices, contiguous. The draws read rows at random, a million per round at
+    free scale: a table a quarter the size of int64 stays in the cache (a free-scale 3L
+    draw and solve ~30% faster on intel's 486k triplets). Indices are exact in any width."""
+    top = int(rows.max()) if rows.size else 0
+    dtype = np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32 if top <= np.iinfo(np.uint32).max else np.int64
+    return np.ascontiguousarray(rows, dtype=dtype)
+
+
 class _AngleTable:
     """Floorplan tuples binned by the angles (mod pi) of their lines relative to the
     anchor line. A query returns the index ranges of the bins that can hold tuples within
@@ -138,7 +148,7 @@ class _AngleTable:
         self.width = np.pi / self.n_bins
         key = self._key(np.floor(np.mod(relative, np.pi) / self.width).astype(np.int64) % self.n_bins)
         order = np.argsort(key, kind="stable")
-        self.rows = rows[order]
+        self.rows = compact_rows(rows[order])
         counts = np.bincount(key, minlength=self.n_bins**self.q)
         self.counts = counts
         self.start = np.cumsum(counts) - counts
@@ -206,7 +216,7 @@ class FloorplanMatches:
         tri = admissible_triplets(near, alpha, par, self.lines.lengths)[0]
         self.triplets = _AngleTable(tri, (alpha[tri[:, 1:]] - alpha[tri[:, :1]]) if len(tri) else np.zeros((0, 2)), tol)
         # the triplets' first two lines, for the two-line solve at a fixed scale
-        self.triplet_heads = np.ascontiguousarray(self.triplets.rows[:, :2], dtype=np.int64)
+        self.triplet_heads = np.ascontiguousarray(self.triplets.rows[:, :2])
         # 2L: a line and a non-parallel neighbour
         pairs = _ordered_pairs(neighbours)
         if len(pairs):

@@ -382,7 +382,7 @@ def drawn_3l(starts, sizes, fraction: float, rng: np.random.Generator, picks, ro
     if len(uniform) == 0:
         return no_models()
     table, (cos_table, sin_table) = _rotation_table(bev_angles, fp_angles, None)
-    rest = (*_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), *_lines(bev_lines), *_lines(fp_lines),
+    rest = (*_pick_columns(picks), np.ascontiguousarray(rows), *_lines(bev_lines), *_lines(fp_lines),
             table, cos_table, sin_table, len(bev_angles), _limits_3l(settings))
     # the draws in consecutive pieces, one per thread of the round, joined in draw order;
     # a piece starts inside the query whose draws cover its first draw
@@ -538,7 +538,7 @@ def drawn_2l(starts, sizes, fraction: float, rng: np.random.Generator, picks, ro
     if total == 0:
         return no_models()
     table, trig = _rotation_2l(bev_angles, fp_angles)
-    models, source = _drawn_2l(starts, sizes, counts, uniform, *_pick_columns(picks), np.ascontiguousarray(rows, dtype=np.int64), scales, *_lines(bev_lines), *_lines(fp_lines),
+    models, source = _drawn_2l(starts, sizes, counts, uniform, *_pick_columns(picks), np.ascontiguousarray(rows), scales, *_lines(bev_lines), *_lines(fp_lines),
                                table, trig, len(bev_angles), check_scale, _limits_2l(settings))
     return _wrapped(models, source)
 
