@@ -75,6 +75,14 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     return rows
 
 
+def _label_of(labels: list[tuple[str, int]], index: int) -> str:
+    """The solver (or WARM, GUIDED, CORRELATIVE) of model `index`, from the per-block
+    (label, count) list: a round holds ~10^5 models and keeps a few dozen, so labels are
+    looked up for those only."""
+    ends = np.cumsum([count for _, count in labels])
+    return labels[int(np.searchsorted(ends, index, side="right"))][0]
+
+
 def _validate(obs, scale_prior: float, iterations: int) -> None:
     if not isinstance(obs, BevObservation):
         raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
@@ -126,7 +134,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
     pool = solver_pool(cfg, bev, fp)
     warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
-    blocks, labels = [], []
+    blocks, labels = [], []  # labels: (solver, model count) per block, in block order
     if pool and iterations > 0:
         counts = np.bincount(rng.integers(len(pool), size=iterations), minlength=len(pool))
         for name, n in zip(pool, counts):
@@ -141,22 +149,21 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
             else:
                 m = models_2c(bev, fp, int(n), cfg, rng)
             blocks.append(m)
-            labels += [name] * len(m)
+            labels.append((name, len(m)))
     if warm:
         blocks.append(model_rows(warm))
-        labels += [WARM] * len(warm)
+        labels.append((WARM, len(warm)))
         guided_modes = warm[: cfg.ransac.guided_modes]
         per_mode = cfg.ransac.guided_iterations // max(1, len(guided_modes))
         for w in guided_modes:
             m = guided_models(bev, fp, w, per_mode, cfg, rng, scale_prior)
             blocks.append(m)
-            labels += [GUIDED] * len(m)
+            labels.append((GUIDED, len(m)))
     if global_search and cfg.correlative.enabled and cfg.scale_mode != "free":
         seeds = correlative_seeds(floorplan, obs, cfg, scale_prior)
         blocks.append(seeds)
-        labels += [CORRELATIVE] * len(seeds)
+        labels.append((CORRELATIVE, len(seeds)))
     models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
-    labels_arr = np.array(labels, dtype=object)
     t1, c1 = time.perf_counter(), time.thread_time()
 
     # ---- scoring -----------------------------------------------------------------------
@@ -188,7 +195,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         cv[:n_refine][better] = rescored.violation[better]
     order = descending(total)
     keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
-    rows = [(cand[i], total[i], cc[i], cv[i], str(labels_arr[top[i]])) for i in keep]
+    rows = [(cand[i], total[i], cc[i], cv[i], _label_of(labels, top[i])) for i in keep]
     if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
         rows += _missing_warm_starts(floorplan, obs, view, warm, cand[keep], anchor, cfg)
         rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))

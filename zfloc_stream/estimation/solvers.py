@@ -360,10 +360,20 @@ def _lines(lines):
     return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (lines.normals[:, 0], lines.normals[:, 1], lines.offsets))
 
 
+@njit
+def _wrap_headings(models):
+    """sim2.wrap_angle of column 2, in place: (theta + pi) % (2 pi) - pi, numba's float %
+    being numpy's (the remainder with the divisor's sign), so the same bits; one pass over
+    a strided column that numpy would walk with three temporaries."""
+    two_pi = 2.0 * np.pi
+    for i in range(models.shape[0]):
+        models[i, 2] = (models[i, 2] + np.pi) % two_pi - np.pi
+
+
 def _wrapped(models, source):
     if len(source) == 0:
         return no_models()
-    models[:, 2] = wrap_angle(models[:, 2])
+    _wrap_headings(models)
     return models, source
 
 
