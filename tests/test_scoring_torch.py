@@ -30,8 +30,8 @@ def world():
     return fp, obs, np.vstack([[3.0, -2.0, 0.7, 1.1], near, anywhere])
 
 
-def _agree(a, b, n_points, device):
-    if device.type == "cpu":
+def _agree(a, b, n_points, device, exact_on_cpu=True):
+    if device.type == "cpu" and exact_on_cpu:
         assert np.array_equal(a, b)  # same float operations in the same order
     else:  # fused multiply-adds may move a point across a cell boundary
         assert np.abs(a - b).max() <= 1.0 / n_points + 1e-12
@@ -48,8 +48,10 @@ def test_torch_kernels_equal_numpy(world, per):
     sparse = sparse_line_points(obs.lines, cfg.sparse_spacing, cfg.max_sparse_points) if len(obs.lines) else obs.wall_points[::7]
     # small chunks on one side: the chunking must not matter either
     for chunk in (cfg.chunk_size, 5_000):
+        # the compiled coarse kernel takes its cos and sin from the C library, torch's terms
+        # from numpy (vector routines on some CPUs, an ulp apart): a point may change cell
         _agree(torch_kernels.coarse_consistency(models, sparse, chunk), numpy_kernels.coarse_consistency(models, sparse, cfg.chunk_size),
-               len(sparse), device)
+               len(sparse), device, exact_on_cpu=False)
         _agree(torch_kernels.consistency(models, obs.wall_points, cfg.tau_c, chunk),
                numpy_kernels.consistency(models, obs.wall_points, cfg.tau_c, cfg.chunk_size), len(obs.wall_points), device)
         cv_numpy = numpy_kernels.violation(models, view, cfg.tau_v, cfg.chunk_size, per)
