@@ -66,7 +66,7 @@ def test_a_round_says_whether_it_searched_globally(monkeypatch):
 
     searches = []
     seeds = ransac.correlative_seeds
-    monkeypatch.setattr(ransac, "correlative_seeds", lambda *a: searches.append(1) or seeds(*a))
+    monkeypatch.setattr(ransac, "correlative_seeds", lambda *a, **k: searches.append(1) or seeds(*a, **k))
     scene = build_scene("apartment", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=40)
     loc = Localizer(scene.floorplan, Settings())

@@ -289,3 +289,31 @@ def test_a_noisy_map_gets_a_bounded_triplet_table_and_still_localizes(plain):
     again = Floorplan.from_occupancy(occ, RES, (0.0, 0.0), settings)
     with pytest.warns(UserWarning, match="max_triplets"):
         assert np.array_equal(floorplan_matches(again, settings.estimator.solvers).triplets.rows, matches.triplets.rows)
+
+
+
+def test_a_round_without_live_modes_searches_across_the_scale_prior(plain, monkeypatch):
+    """At a scale prior, the exhaustive search of a round that follows no mode runs at
+    correlative.scales scales spread over the prior's range, strictly inside it and
+    geometrically even about the prior; a round with a live mode searches at the prior
+    only (a depth network's scale error would otherwise leave the first round's seeds
+    off the walls: docs/robustness.md)."""
+    from zfloc_stream.estimation import model_generation
+
+    fp, truth, obs = plain
+    searched = []
+    search = model_generation.correlative_models
+    monkeypatch.setattr(model_generation, "correlative_models", lambda fp_, pts, scale, **k: searched.append(scale) or search(fp_, pts, scale, **k))
+    cfg = Settings(estimator={"scale_mode": "prior"}).estimator
+    r = cfg.solvers.prior_range
+    localize(fp, obs, cfg, make_rng(0, "t"), scale_prior=1.1, iterations=50)
+    assert len(searched) == cfg.correlative.scales == 3
+    assert 1.1 / (1 + r) < searched[0] < searched[1] < searched[2] < 1.1 * (1 + r)
+    assert searched[1] == pytest.approx(1.1) and searched[2] / searched[1] == pytest.approx(searched[1] / searched[0])
+    searched.clear()
+    localize(fp, obs, cfg, make_rng(0, "t"), scale_prior=1.1, iterations=50, warm_start=[truth])
+    assert searched == [1.1]
+    searched.clear()
+    one = cfg.model_copy(update={"correlative": cfg.correlative.model_copy(update={"scales": 1})})
+    localize(fp, obs, one, make_rng(0, "t"), scale_prior=1.1, iterations=50)
+    assert searched == [1.1]

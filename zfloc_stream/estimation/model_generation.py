@@ -105,16 +105,26 @@ def solver_pool(cfg: EstimatorSettings, bev: BevSamples, fp: FloorplanMatches) -
 # --------------------------------------------------------------------------------------
 
 
-def correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, scale_prior: float) -> np.ndarray:
+def correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, scale_prior: float,
+                      across_prior: bool = False) -> np.ndarray:
     """Exhaustive grid placements at the prior (or fixed) scale, LM-refined on the
-    wall-face field so they enter the ranking as sharp as the refined RANSAC models."""
+    wall-face field so they enter the ranking as sharp as the refined RANSAC models.
+
+    across_prior: at a scale prior, search at correlative.scales scales spread over the
+    prior's range (cfg.solvers' bounds, as localize narrowed them) instead: a round that
+    follows no mode has no evidence of the scale yet."""
     c = cfg.correlative
-    scale = 1.0 if cfg.scale_mode == "fixed" else scale_prior
+    if cfg.scale_mode == "fixed":
+        scales = [1.0]
+    elif across_prior and c.scales > 1:  # the range's end points stay out: their neighbours cover them
+        scales = np.geomspace(cfg.solvers.min_scale, cfg.solvers.max_scale, c.scales + 2)[1:-1]
+    else:
+        scales = [scale_prior]
     angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
-    models = correlative_models(
-        floorplan, obs.wall_points, scale, cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
+    models = np.concatenate([correlative_models(
+        floorplan, obs.wall_points, float(scale), cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
         peaks=c.peaks, angles=angles, distinct_distance=c.distinct_distance, distinct_angle_deg=c.distinct_angle_deg,
-    )
+    ) for scale in scales])
     if len(models) == 0:
         return np.zeros((0, 4))
     field = floorplan_scorer(floorplan, cfg.scoring).face_field

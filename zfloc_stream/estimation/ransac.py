@@ -160,7 +160,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
             blocks.append(m)
             labels.append((GUIDED, len(m)))
     if global_search and cfg.correlative.enabled and cfg.scale_mode != "free":
-        seeds = correlative_seeds(floorplan, obs, cfg, scale_prior)
+        seeds = correlative_seeds(floorplan, obs, cfg, scale_prior, across_prior=not warm)
         blocks.append(seeds)
         labels.append((CORRELATIVE, len(seeds)))
     models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
