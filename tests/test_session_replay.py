@@ -320,3 +320,22 @@ def test_sample_replays_in_a_perturbed_environment(capsys):
     run = subprocess.run([sys.executable, "-c", code, str(sample), "--check", "--no-progress"], env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     assert run.stdout.startswith("environment: recorded elsewhere: ") and "frames checked" in run.stdout
+
+
+def test_a_session_recorded_before_a_setting_existed_replays_as_it_ran():
+    """Settings logged before estimator.correlative.scales existed get the value those runs
+    had (one scale, at the prior), not today's default; a complete block is left as is.
+    (The replay samples recorded before the setting replayed with --check identically this
+    way before they were re-recorded.)"""
+    import copy
+
+    from zfloc_stream.config import Settings, settings_from_dict
+    from zfloc_stream.session.reader import as_recorded
+
+    old = Settings().model_dump()
+    del old["estimator"]["correlative"]["scales"]
+    assert Settings().estimator.correlative.scales == 3
+    assert settings_from_dict(as_recorded(old)).estimator.correlative.scales == 1
+    complete = Settings().model_dump()
+    assert as_recorded(copy.deepcopy(complete)) == complete
+    assert as_recorded({"seed": 3}) == {"seed": 3}  # no estimator block logged: nothing to fill

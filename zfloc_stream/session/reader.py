@@ -56,6 +56,24 @@ from .mcap_file import check_path, check_topics, file_records, open_indexed, ope
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 
 
+# Settings added after a session may have been recorded, with the value that reproduces the
+# runs made before they existed: a logged settings block without one of these keys gets that
+# value, not today's default, so an older session replays as it ran.
+PREDATED_SETTINGS = {("estimator", "correlative", "scales"): 1}
+
+
+def as_recorded(data: dict) -> dict:
+    """The logged settings with PREDATED_SETTINGS' values where their keys are missing
+    (sections that are missing too stay missing: nothing was logged there)."""
+    for path, value in PREDATED_SETTINGS.items():
+        section = data
+        for key in path[:-1]:
+            section = section.get(key) if isinstance(section, dict) else None
+        if isinstance(section, dict) and path[-1] not in section:
+            section[path[-1]] = value
+    return data
+
+
 @dataclass
 class LoggedOutputs:
     """What the localizer logged for one frame (None where nothing was logged)."""
@@ -126,7 +144,7 @@ class Session:
         if not isinstance(data, dict):
             raise SessionLogError(f"{self.path}: {what} are not a mapping")
         try:
-            return settings_from_dict(data, source=f"{self.path} ({what})")
+            return settings_from_dict(as_recorded(data), source=f"{self.path} ({what})")
         except ZflocError as err:
             raise SessionLogError(str(err)) from None
 
