@@ -344,3 +344,19 @@ def test_frame_hits_rescale_about_the_camera_only_under_metric_odometry():
         local = LocalRefinement(build_scene("rooms", seed=0).floorplan, s.localizer, s.estimator)
         assert np.allclose(local.frame_hits(hits, camera, mode), expected)
         assert local.frame_hits(hits, camera, None) is hits
+
+
+def test_metric_odometry_at_a_scale_other_than_a_prior_is_said_to_do_nothing():
+    """odometry_scale 'metric' only acts at a scale prior: at a free or fixed scale a
+    Localizer says so once (one warning), and at a prior it says nothing."""
+    import warnings as w
+
+    floorplan = build_scene("rooms", seed=0).floorplan
+    for mode in ("free", "fixed"):
+        s = load_settings(overrides=["localizer.odometry_scale=metric", f"estimator.scale_mode={mode}"])
+        with pytest.warns(UserWarning, match="applies at estimator.scale_mode 'prior' only") as caught:
+            Localizer(floorplan, s).close()
+        assert len([c for c in caught if "odometry_scale" in str(c.message)]) == 1
+    with w.catch_warnings():
+        w.simplefilter("error")
+        Localizer(floorplan, load_settings(overrides=["localizer.odometry_scale=metric"])).close()
