@@ -47,11 +47,6 @@ class Localizer:
         settings.backbones when the first such frame arrives (a replay of a session whose
         frames carry depth never loads them)."""
         self.settings = settings or Settings()
-        if self.settings.localizer.odometry_scale == "metric" and self.settings.estimator.scale_mode != "prior":
-            # measured: monocular camera windows at a free scale 60% against 92% at the prior
-            warnings.warn(f"localizer.odometry_scale 'metric' applies at estimator.scale_mode 'prior' only: at "
-                          f"'{self.settings.estimator.scale_mode}' the depth and the odometry share one scale, so a depth "
-                          f"network's scale error goes uncorrected", stacklevel=2)
         self.perception = perception
         self.floorplan = floorplan
         # the scorer backend (scoring.backend: the compiled FloorplanScorer or torch's) is
@@ -68,6 +63,11 @@ class Localizer:
         self.rounds = RoundScheduler(floorplan, self.settings)
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
+        if self.settings.localizer.odometry_scale == "metric" and not self.local.metric_odometry:
+            # measured: monocular camera windows at a free scale 60% against 92% at the prior
+            warnings.warn(f"localizer.odometry_scale 'metric' applies at estimator.scale_mode 'prior' only: at "
+                          f"'{self.settings.estimator.scale_mode}' the depth and the odometry share one scale, so a depth "
+                          f"network's scale error goes uncorrected", stacklevel=2)
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
         self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
         self._recent_cameras: deque[np.ndarray] = deque(maxlen=self._recent_hits.maxlen)  # each recent frame's plane position
@@ -222,10 +222,12 @@ class Localizer:
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
         old_alignment = None if old is None else self.local.alignment_of_mode(old)
-        # the old place is judged as it is reported (its hits rescaled under metric odometry)
+        # the old place is judged as it is reported: its hits rescaled under metric odometry
+        # (else they are the recent hits themselves, which better_place reads by default)
         verdict = test.feed(scheduled, outcome, lambda found: old is None or better_place(
             found.alignment, old_alignment, old, self.tracker, self.monitor, list(self._recent_hits), scheduled.plane_pose[:2],
-            [self.local.frame_hits(h, c, old) for h, c in zip(self._recent_hits, self._recent_cameras)]))
+            [self.local.frame_hits(h, c, old) for h, c in zip(self._recent_hits, self._recent_cameras)]
+            if self.local.metric_odometry else None))
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
             self.kidnaps_found += 1

@@ -75,12 +75,12 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     return rows
 
 
-def _label_of(labels: list[tuple[str, int]], index: int) -> str:
-    """The solver (or WARM, GUIDED, CORRELATIVE) of model `index`, from the per-block
-    (label, count) list: a round holds ~10^5 models and keeps a few dozen, so labels are
-    looked up for those only."""
-    ends = np.cumsum([count for _, count in labels])
-    return labels[int(np.searchsorted(ends, index, side="right"))][0]
+def _labels_of(labels: list[tuple[str, int]], index: np.ndarray) -> list[str]:
+    """The solver (or WARM, GUIDED, CORRELATIVE) of each model in `index`, from the
+    per-block (label, count) list: a round holds ~10^5 models and keeps a few dozen, so
+    labels are looked up for those only."""
+    block = np.searchsorted(np.cumsum([count for _, count in labels]), index, side="right")
+    return [labels[b][0] for b in block]
 
 
 def _validate(obs, scale_prior: float, iterations: int) -> None:
@@ -195,7 +195,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         cv[:n_refine][better] = rescored.violation[better]
     order = descending(total)
     keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
-    rows = [(cand[i], total[i], cc[i], cv[i], _label_of(labels, top[i])) for i in keep]
+    rows = [(cand[i], total[i], cc[i], cv[i], label) for i, label in zip(keep, _labels_of(labels, top[keep]))]
     if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
         rows += _missing_warm_starts(floorplan, obs, view, warm, cand[keep], anchor, cfg)
         rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
