@@ -42,7 +42,8 @@ belgioioso camera 11.7 -> 19.7 / 668 -> 150 / 97 -> 37; fhw camera 11.9 -> 51.6 
 498 / 85 -> 95; laser fhw 11.3 -> 16.1 / 611 -> 674 / 92 -> 59; laser intel 9.7 -> 13.4 /
 446 -> 176 / 79 -> 29. Under this load the runs vary by 2x; fhw camera was worse this time.
 The first pose lands at the same frame. The p99 of 50 frames is set by the one or two
-rounds that run inline before the first pose (by design: the first fix is not delayed);
+rounds that ran inline before the first pose (until 2026-12-04; now a preview round on the
+worker gives that pose, docs/performance.md);
 back to back, a join also waits for the worker's round, and the median grows because the
 worker shares the two loaded cores with the stream. The issue's targets (p99 <= 15 ms,
 amortized <= 10 ms, quiet machine) were not reached here; this machine was never quiet.
@@ -281,7 +282,7 @@ def main() -> None:
                          "(run it once with this tree and once with another checkout on PYTHONPATH to compare defaults)")
     ap.add_argument("--laser-scans", type=int, default=50,
                     help="--defaults: scans per laser window (default 50; a longer window shows the p99 of a steady "
-                         "stream, where the rounds before the first pose, which run inline, are fewer than 1%%)")
+                         "stream)")
     args = ap.parse_args()
     if args.laser_scans < 10:
         ap.error(f"--laser-scans must be at least 10, got {args.laser_scans}")

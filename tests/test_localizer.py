@@ -192,7 +192,10 @@ def test_a_bad_frame_is_skipped_and_the_stream_goes_on():
 def test_a_round_without_enough_evidence_says_why():
     scene = build_scene("rooms", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=10)
-    settings = Settings().model_copy(update={"localizer": Settings().localizer.model_copy(update={"min_wall_points": 10_000_000})})
+    # inline: each round's reason lands at the frame that starts it (online, a preview's at
+    # the k-th frame and that frame's own round's at the next)
+    settings = Settings().model_copy(update={"localizer": Settings().localizer.model_copy(
+        update={"min_wall_points": 10_000_000, "pipeline": "inline"})})
     _, est = _run(scene, seq, settings)
     k = settings.localizer.every_k_frames
     due = [e for e in est if (e.frame + 1) % k == 0]

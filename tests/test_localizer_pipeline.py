@@ -159,19 +159,28 @@ def test_run_and_replay_cli_agree_on_a_pipelined_session(laser, tmp_path, capsys
     assert replay_cli.main([str(Path(out) / "session.mcap"), "--exact"]) == 0
 
 
-def test_online_gives_the_first_fix_inline_then_joins_later(laser):
-    """online (the default): the rounds before the first pose run inline, so the first fix
-    lands at the same frame and with the same bits as inline; from then on each round
-    lands round_delay frames after its start, on the worker."""
+def test_online_reports_a_preview_at_the_inline_first_fix_frame_then_joins_later(laser):
+    """online (the default): a preview round started one frame early on the worker gives
+    the first pose at the frame where inline gives it; the tracker never sees the preview,
+    so from the next frame on the run is the pipelined one, bit for bit. Without the preview
+    the first round runs inline, with inline's bits. Every round after the first pose lands
+    round_delay frames after its start, on the worker."""
     floorplan, frames = laser
     k = 5
     inline = run_localizer(floorplan, frames, settings_with("localizer.pipeline=inline"))
     online = run_localizer(floorplan, frames, settings_with())
+    pipelined = run_localizer(floorplan, frames, settings_with("localizer.pipeline=pipelined"))
+    unpreviewed = run_localizer(floorplan, frames, settings_with("localizer.first_fix_preview=false"))
     assert settings_with().localizer.pipeline == "online"
     first = next(i for i, e in enumerate(inline) if e.pose is not None)
     assert next(i for i, e in enumerate(online) if e.pose is not None) == first
-    assert [estimate_bits(e) for e in online[: first + 1]] == [estimate_bits(e) for e in inline[: first + 1]]
-    later = [i for i in range(first + 1, len(frames)) if (i + 1) % k == 0]
+    assert online[first].status != "tracking"
+    # no push ran a round: each round's stage timings come with a wait for the worker
+    assert all("round_wait" in e.timings for e in online if "model_estimation" in e.timings)
+    assert "round_start" in online[first - 1].timings and "round_wait" in online[first].timings
+    assert [estimate_bits(e) for e in online[first + 1:]] == [estimate_bits(e) for e in pipelined[first + 1:]]
+    assert [estimate_bits(e) for e in unpreviewed[: first + 1]] == [estimate_bits(e) for e in inline[: first + 1]]
+    later = [i for i in range(first, len(frames)) if (i + 1) % k == 0]
     assert later and all("round_start" in online[i].timings for i in later)
     delay = settings_with().localizer.round_delay
     assert all("round_wait" in online[i + delay].timings for i in later if i + delay < len(frames))

@@ -55,6 +55,41 @@ def test_online_runs_inline_until_a_pose_exists_then_on_the_worker(fake_rounds):
     s.close()
 
 
+def test_online_previews_the_first_round_one_frame_early_on_the_worker(fake_rounds):
+    """No pose: the k-th fused frame's round is previewed from the frame before, on the
+    worker, landing in the k-th frame's push; the k-th frame's own round goes to the worker
+    too, so no push runs a round."""
+    s = scheduler("localizer.pipeline=online", "localizer.every_k_frames=5")
+    assert [s.due(fused, has_pose=False) for fused in (1, 2, 3)] == [None] * 3
+    assert s.due(4, has_pose=False) == "preview"
+    s.start("preview", lambda copy: RoundJob(3, None, [], False), np.zeros(3), {})
+    assert s.due(5, has_pose=False) == "pipelined"  # nothing in flight, yet not inline: it was previewed
+    assert [(d.job.index, d.preview) for d, _ in s.landed(4, {})] == [(3, True)]
+    s.start("pipelined", lambda copy: RoundJob(4, None, [], False), np.zeros(3), {})
+    assert landed(s, 4) == [] and landed(s, 5) == [4]
+    assert s.due(9, has_pose=True) is None and s.due(10, has_pose=True) == "pipelined"
+    assert fake_rounds == [(3, False), (4, False)]
+    s.close()
+
+
+def test_the_first_round_runs_inline_without_a_preview(fake_rounds):
+    assert scheduler("localizer.first_fix_preview=false").due(4, has_pose=False) is None
+    assert scheduler("localizer.first_fix_preview=false").due(5, has_pose=False) == "inline"
+    # the frame before was not fused (a skipped frame): the k-th frame's round runs inline
+    assert scheduler().due(5, has_pose=False) == "inline"
+    # a round every frame: there is no frame in between to preview from
+    assert scheduler("localizer.every_k_frames=1").due(1, has_pose=False) == "inline"
+    assert scheduler("localizer.pipeline=inline").due(4, has_pose=False) is None
+
+
+def test_no_preview_while_a_pose_exists_or_a_round_is_in_flight(fake_rounds):
+    s = scheduler("localizer.pipeline=online", "localizer.join_delay=3")
+    assert s.due(4, has_pose=True) is None
+    start(s, 5, has_pose=True)  # pipelined, lands at 8
+    assert s.due(9, has_pose=False) is None  # its result may give a pose
+    s.close()
+
+
 @pytest.mark.parametrize("pipeline", ["pipelined", "delayed"])
 def test_rounds_land_exactly_at_their_join_frames_oldest_first(fake_rounds, pipeline):
     s = scheduler(f"localizer.pipeline={pipeline}", "localizer.join_delay=12", "localizer.every_k_frames=5")

@@ -323,10 +323,11 @@ def test_sample_replays_in_a_perturbed_environment(capsys):
 
 
 def test_a_session_recorded_before_a_setting_existed_replays_as_it_ran():
-    """Settings logged before estimator.correlative.scales existed get the value those runs
-    had (one scale, at the prior), not today's default; a complete block is left as is.
-    (The replay samples recorded before the setting replayed with --check identically this
-    way before they were re-recorded.)"""
+    """Settings logged before estimator.correlative.scales or localizer.first_fix_preview
+    existed get the values those runs had (one scale, at the prior; the first round inline),
+    not today's defaults; a complete block is left as is. (The replay samples recorded
+    before each setting replayed with --check identically this way before they were
+    re-recorded.)"""
     import copy
 
     from zfloc_stream.config import Settings, settings_from_dict
@@ -334,8 +335,10 @@ def test_a_session_recorded_before_a_setting_existed_replays_as_it_ran():
 
     old = Settings().model_dump()
     del old["estimator"]["correlative"]["scales"]
-    assert Settings().estimator.correlative.scales == 3
-    assert settings_from_dict(as_recorded(old)).estimator.correlative.scales == 1
+    del old["localizer"]["first_fix_preview"]
+    assert Settings().estimator.correlative.scales == 3 and Settings().localizer.first_fix_preview
+    recorded = settings_from_dict(as_recorded(old))
+    assert recorded.estimator.correlative.scales == 1 and not recorded.localizer.first_fix_preview
     complete = Settings().model_dump()
     assert as_recorded(copy.deepcopy(complete)) == complete
     assert as_recorded({"seed": 3}) == {"seed": 3}  # no estimator block logged: nothing to fill

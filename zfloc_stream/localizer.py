@@ -20,6 +20,7 @@ frames' wall hits.
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from collections import deque
@@ -75,6 +76,7 @@ class Localizer:
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
         self._adopted_at = -1  # frame whose kidnap round was adopted last
+        self._preview: HypothesisTracker | None = None  # reported while the tracker has no pose (_show_preview)
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
@@ -96,8 +98,8 @@ class Localizer:
                 self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
-        if plane_pose is not None and self.frames_fused % lc.every_k_frames == 0:
-            mode = self.rounds.mode(has_pose=self.tracker.best is not None)
+        mode = None if plane_pose is None else self.rounds.due(self.frames_fused, has_pose=self.tracker.best is not None)
+        if mode is not None:
             self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
             if self._kidnap is not None:  # the tracker goes on meanwhile: nothing is lost if the test fails
                 self.rounds.start(mode, lambda copy: self._kidnap_job(index, copy), plane_pose, timings)
@@ -181,6 +183,8 @@ class Localizer:
         local refinement follows the tracked mode. Returns why the round did not run (None
         when it did)."""
         self.last_round = outcome
+        if scheduled.preview:
+            return self._show_preview(scheduled, outcome)
         if scheduled.job.since:
             return self._kidnap_round(scheduled, outcome, timings)
         if scheduled.job.index < self._adopted_at:
@@ -195,7 +199,20 @@ class Localizer:
         self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
         timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         outcome.cpu_timings["tracking"] = time.thread_time() - c0
+        if self.tracker.best is not None:
+            self._preview = None  # the tracker's own pose from now on
         self._refine_locally(timings, outcome)
+        return None
+
+    def _show_preview(self, scheduled: ScheduledRound, outcome: RoundOutcome) -> str | None:
+        """A preview round landed (round_scheduler.py): what a copy of the tracker makes of
+        it is reported while the tracker itself has no pose. The tracker never sees it: the
+        round of this frame, on all of its frames, updates the tracker when it lands."""
+        if outcome.result is None:
+            return outcome.skipped
+        self.last_observation, self.last_result = outcome.observation, outcome.result
+        self._preview = copy.deepcopy(self.tracker)
+        self._preview.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
         return None
 
     # ------------------------------------------------------------------------------
@@ -254,22 +271,25 @@ class Localizer:
 
     # ------------------------------------------------------------------------------
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:
-        best = self.tracker.best
+        shown = self._preview if self._preview is not None and self.tracker.best is None else self.tracker
+        best = shown.best
         if best is None or plane_pose is None:
             pose = cov = alignment = None
             score = float("nan")
         else:
             alignment = self.local.alignment_of_mode(best)
             pose = np.array(alignment.apply_pose(*plane_pose))
-            cov = self.tracker.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
+            cov = shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         if self._kidnap is not None and alignment is not None:
             consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
-        status, confidence = self.tracker.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
-        alternatives = () if plane_pose is None else self.tracker.estimate_alternatives(plane_pose[:2], plane_pose[2])
+        status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
+        if shown is not self.tracker and status == "tracking":
+            status = self.tracker.status  # a preview is one round on fewer frames: never a promise
+        alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose
             first = alternatives[0]
             alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]

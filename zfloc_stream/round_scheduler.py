@@ -9,8 +9,11 @@ for bit:
 - pipelined: run on one worker (a thread, or a process: localizer.worker) beside the
   stream and applied at frame i + round_delay exactly (that push waits if the worker is
   late);
-- online (the default): inline while no pose exists and nothing is pending (the first
-  fix lands as early as inline gives it), pipelined after;
+- online (the default): pipelined; while no pose exists and nothing is pending, a
+  preview round starts one fused frame before each k-th frame, on the worker, and lands
+  in the k-th frame's push, so the first fix is reported where inline gives it and no
+  push runs a whole round (localizer.first_fix_preview; without it, or when the frame
+  before was not fused, the k-th frame's round runs inline);
 - delayed: computed inline at frame i, applied at pipelined's join frame (pipelined's
   results without a worker).
 
@@ -71,6 +74,7 @@ class ScheduledRound:
     plane_pose: np.ndarray  # frame job.index's sensor pose: the tracker is anchored there
     request: int  # global-search requests made before it started (a later one stays pending)
     outcome: RoundOutcome | Future | None = None
+    preview: bool = False  # a preview of the next k-th frame's round: reported, never tracked
 
 
 def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
@@ -153,6 +157,7 @@ class RoundScheduler:
         self._pool: Executor | None = None
         self._global_wanted = False  # the monitor asked the next round for a global search
         self._requests = 0  # how many times it asked
+        self._previewed = 0  # the k-th fused frame whose round a preview started ahead of
         lc = settings.localizer
         if lc.pipeline in ("pipelined", "online") and lc.worker == "process":
             self._executor().submit(int)  # start the process now: it takes a second or two to import
@@ -175,15 +180,33 @@ class RoundScheduler:
         self._global_wanted = True
         self._requests += 1
 
+    def due(self, fused: int, has_pose: bool) -> str | None:
+        """The round, if any, that starts at the frame that makes `fused` fused frames:
+        where it runs (self.mode's inline, pipelined or delayed, or "preview": on the
+        worker, landing at the next frame), or None. Rounds belong to every k-th fused
+        frame; the online mode previews one while there is no pose (module docstring)."""
+        lc = self.settings.localizer
+        k = lc.every_k_frames
+        if fused % k == 0:
+            # after its preview, the k-th frame's round goes to the worker: a push never runs a round
+            return "pipelined" if self._previewed == fused else self.mode(has_pose)
+        if (lc.pipeline == "online" and lc.first_fix_preview and (fused + 1) % k == 0
+                and not has_pose and not self._scheduled):
+            self._previewed = fused + 1
+            return "preview"
+        return None
+
     def start(self, mode: str, make_job, plane_pose: np.ndarray, timings: dict) -> None:
         """Start the round of the job make_job(copy) gives (copy: the snapshot must be a
-        copy, since the round leaves this thread) where `mode` (self.mode(...)) says;
+        copy, since the round leaves this thread) where `mode` (self.due(...)) says;
         `landed` returns it at its join frame."""
         lc = self.settings.localizer
         t0 = time.perf_counter()
-        job = make_job(mode == "pipelined")
-        scheduled = ScheduledRound(job, job.index + (0 if mode == "inline" else lc.round_delay), plane_pose, self._requests)
-        if mode == "pipelined":
+        on_worker = mode in ("pipelined", "preview")
+        job = make_job(on_worker)
+        delay = {"inline": 0, "preview": 1}.get(mode, lc.round_delay)
+        scheduled = ScheduledRound(job, job.index + delay, plane_pose, self._requests, preview=mode == "preview")
+        if on_worker:
             scheduled.outcome = self._executor().submit(*self._task(job))
             timings["round_start"] = time.perf_counter() - t0
         else:
@@ -191,12 +214,12 @@ class RoundScheduler:
         self._scheduled.append(scheduled)
 
     def mode(self, has_pose: bool) -> str:
-        """Where the next round runs: inline, pipelined or delayed. Decided by the state at
-        its start frame, so a replay decides alike."""
+        """Where a round starting at its k-th frame runs: inline, pipelined or delayed.
+        Decided by the state at its start frame, so a replay decides alike."""
         mode = self.settings.localizer.pipeline
         if mode == "online":
-            # no pose yet: the round is the user's first fix, it lands in this push; later
-            # ones go to the worker
+            # no pose yet and no preview: the round is the user's first fix, it lands in this
+            # push; later ones go to the worker
             mode = "inline" if not has_pose and not self._scheduled else "pipelined"
         return mode
 

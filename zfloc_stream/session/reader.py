@@ -59,7 +59,7 @@ _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x fa
 # Settings added after a session may have been recorded, with the value that reproduces the
 # runs made before they existed: a logged settings block without one of these keys gets that
 # value, not today's default, so an older session replays as it ran.
-PREDATED_SETTINGS = {("estimator", "correlative", "scales"): 1}
+PREDATED_SETTINGS = {("estimator", "correlative", "scales"): 1, ("localizer", "first_fix_preview"): False}
 
 
 def as_recorded(data: dict) -> dict:

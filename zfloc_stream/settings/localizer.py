@@ -60,11 +60,11 @@ class LocalizerSettings(Section):
     # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
     # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
     release_memory: bool = True
-    # Where a round runs (localizer.py). online (default, the Localizer API and `run`): a
-    # round runs inline while no pose exists (the first pose lands at the frame whose round
-    # finds it, as inline gives it) and, once there is a pose, on one worker beside the
-    # stream, applied exactly join_delay frames later; whether a round is inline is decided
-    # by the state at its start frame, so a run replays bit for bit. inline: inside the push
+    # Where a round runs (round_scheduler.py). online (default, the Localizer API and `run`):
+    # on one worker beside the stream, applied exactly join_delay frames later; while no pose
+    # exists, a preview round (first_fix_preview) gives the first pose at the frame where
+    # inline gives it. Where a round runs is decided by the state at its start frame, so a
+    # run replays bit for bit. inline: inside the push
     # of the frame that starts it, applied at once (studies: offline, no latency to hide).
     # pipelined: every round on the worker, applied join_delay frames later (push blocks
     # there if the worker is late), so push costs about one fusion. delayed: computed inline
@@ -76,6 +76,13 @@ class LocalizerSettings(Section):
     # every_k_frames (5) a correction landed 5 frames late and cost real-building and scene
     # windows at #20 / #35 / #100 (docs/kernels.md); at 1 no length is below inline.
     join_delay: int = Field(1, ge=0, le=10_000)
+    # online, while there is no pose and no round in flight: a preview round starts one fused
+    # frame before each k-th frame, on the worker, and its best mode is reported at the k-th
+    # frame, where inline reports the first fix, so no push runs a whole round. The k-th
+    # frame's own round then runs on the worker like every later one and lands at the next
+    # frame. The tracker never sees a preview, and a preview frame is never `tracking`.
+    # false: that round runs inline in the k-th frame's push instead.
+    first_fix_preview: bool = True
     worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
 
     _ordered = ordered(("monitor_min_points", "monitor_max_points", "<="))
