@@ -275,7 +275,7 @@ def main() -> None:
     ap.add_argument("--skip-stages", action="store_true", help="push latency only")
     ap.add_argument("--latency-frames", type=int, default=None, help="640x480 frames per latency run (default 40 quick, 120)")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second the latency runs feed (0: back to back)")
-    ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs (s; Python's default 0.005)")
+    ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs, --defaults too (s; Python's default 0.005)")
     ap.add_argument("--set", action="append", default=[], help="dotted.key=value for every run")
     ap.add_argument("--defaults", action="store_true",
                     help="only: push latency with the package defaults on the shared real camera sessions and laser logs "
@@ -286,6 +286,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.laser_scans < 10:
         ap.error(f"--laser-scans must be at least 10, got {args.laser_scans}")
+    if args.switch_interval:  # how long a thread waiting for the GIL waits before asking for it
+        sys.setswitchinterval(args.switch_interval)
     if args.defaults:
         import zfloc_stream
 
@@ -302,8 +304,6 @@ def main() -> None:
             for name, plan, frames, overrides in cases(args.quick):
                 print_stages(name, stage_times(plan, frames, load_settings(overrides=overrides + ["localizer.pipeline=inline"] + args.set)))
 
-    if args.switch_interval:  # how long a thread waiting for the GIL waits before asking for it
-        sys.setswitchinterval(args.switch_interval)
     n = args.latency_frames or (40 if args.quick else 120)
     scene = build_scene("apartment", seed=0)
     modes = [("inline", ["localizer.pipeline=inline"]), ("pipelined thread", ["localizer.pipeline=pipelined"])]
