@@ -101,7 +101,7 @@ class Localizer:
         mode = None if plane_pose is None else self.rounds.due(self.frames_fused, has_pose=self.tracker.best is not None)
         if mode is not None:
             self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
-            if self._kidnap is not None:  # the tracker goes on meanwhile: nothing is lost if the test fails
+            if self._kidnap is not None and mode != "preview":  # the tracker goes on meanwhile: nothing is lost if the test fails
                 self.rounds.start(mode, lambda copy: self._kidnap_job(index, copy), plane_pose, timings)
             reasons += [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
@@ -184,7 +184,7 @@ class Localizer:
         when it did)."""
         self.last_round = outcome
         if scheduled.preview:
-            return self._show_preview(scheduled, outcome)
+            return self._show_preview(scheduled, outcome, timings)
         if scheduled.job.since:
             return self._kidnap_round(scheduled, outcome, timings)
         if scheduled.job.index < self._adopted_at:
@@ -204,15 +204,17 @@ class Localizer:
         self._refine_locally(timings, outcome)
         return None
 
-    def _show_preview(self, scheduled: ScheduledRound, outcome: RoundOutcome) -> str | None:
+    def _show_preview(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A preview round landed (round_scheduler.py): what a copy of the tracker makes of
         it is reported while the tracker itself has no pose. The tracker never sees it: the
         round of this frame, on all of its frames, updates the tracker when it lands."""
         if outcome.result is None:
             return outcome.skipped
         self.last_observation, self.last_result = outcome.observation, outcome.result
+        t0 = time.perf_counter()
         self._preview = copy.deepcopy(self.tracker)
         self._preview.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
+        timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         return None
 
     # ------------------------------------------------------------------------------
