@@ -265,7 +265,7 @@ def defaults_latency(frames, floorplan, overrides, rate: float) -> dict:
     first = next((i for i, e in enumerate(estimates) if e.pose is not None), None)
     after = w[first + 1:] if first is not None and first + 1 < len(w) else w[:0]
     return {"median": np.median(w), "p99": np.percentile(w, 99), "amortized": w.sum() / len(w), "first": first,
-            "p99_after": np.percentile(after, 99) if len(after) else np.nan}
+            "p99_after": np.percentile(after, 99) if len(after) else np.nan, "slowest": int(np.argmax(w)), "max": w.max()}
 
 
 def main() -> None:
@@ -296,7 +296,8 @@ def main() -> None:
         for name, plan, frames, overrides in default_cases(args.laser_scans):
             s = defaults_latency(frames, plan, overrides + args.set, args.rate)
             print(f"  {name:34s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  amortized {s['amortized']:6.1f}  "
-                  f"first pose at frame {s['first']}  p99 after it {s['p99_after']:6.1f}", flush=True)
+                  f"first pose at frame {s['first']}  p99 after it {s['p99_after']:6.1f}  "
+                  f"slowest: frame {s['slowest']} ({s['max']:.1f})", flush=True)
         return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
     if not args.skip_stages:
