@@ -187,6 +187,26 @@ def test_online_reports_a_preview_at_the_inline_first_fix_frame_then_joins_later
     assert all(e.pose is not None for e in online[first:])
 
 
+def test_a_preview_with_too_little_evidence_leaves_the_first_round_inline(laser):
+    """The preview sees one frame fewer: where that is below localizer.min_wall_points but
+    the k-th frame's BEV is not, the k-th frame's round runs inline, and the first fix is
+    inline's, at inline's frame, with inline's bits."""
+    floorplan, frames = laser
+    walls = {}
+    for k in (4, 5):  # the wall points of the first round's BEV, one frame fewer and at the k-th frame
+        with Localizer(floorplan, settings_with("localizer.pipeline=inline", f"localizer.every_k_frames={k}")) as loc:
+            for f in frames[:k]:
+                loc.push(f)
+            walls[k] = len(loc.last_observation.wall_points)
+    assert walls[4] < walls[5]
+    needs = f"localizer.min_wall_points={walls[4] + 1}"
+    inline = run_localizer(floorplan, frames[:10], settings_with("localizer.pipeline=inline", needs))
+    online = run_localizer(floorplan, frames[:10], settings_with(needs))
+    assert online[4].pose is not None and "round_start" not in online[4].timings  # the round ran in the push
+    assert "min_wall_points" in online[4].round_skipped  # the preview's reason
+    assert estimate_bits(online[4])[:-1] == estimate_bits(inline[4])[:-1]  # all but round_skipped
+
+
 def test_online_replays_bit_for_bit_on_a_thread_or_a_process(laser):
     floorplan, frames = laser
     a = run_localizer(floorplan, frames, settings_with("localizer.pipeline=online"))

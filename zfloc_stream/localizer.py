@@ -98,7 +98,8 @@ class Localizer:
                 self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
         reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
-        mode = None if plane_pose is None else self.rounds.due(self.frames_fused, has_pose=self.tracker.best is not None)
+        previewed = self._preview is not None and self._preview.best is not None
+        mode = None if plane_pose is None else self.rounds.due(self.frames_fused, self.tracker.best is not None, previewed)
         if mode is not None:
             self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
             if self._kidnap is not None and mode != "preview":  # the tracker goes on meanwhile: nothing is lost if the test fails
@@ -209,6 +210,7 @@ class Localizer:
         it is reported while the tracker itself has no pose. The tracker never sees it: the
         round of this frame, on all of its frames, updates the tracker when it lands."""
         if outcome.result is None:
+            self._preview = None  # each preview replaces the last, one that found nothing too
             return outcome.skipped
         self.last_observation, self.last_result = outcome.observation, outcome.result
         t0 = time.perf_counter()

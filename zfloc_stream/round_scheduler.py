@@ -12,8 +12,9 @@ for bit:
 - online (the default): pipelined; while no pose exists and nothing is pending, a
   preview round starts one fused frame before each k-th frame, on the worker, and lands
   in the k-th frame's push, so the first fix is reported where inline gives it and no
-  push runs a whole round (localizer.first_fix_preview; without it, or when the frame
-  before was not fused, the k-th frame's round runs inline);
+  push runs a whole round (localizer.first_fix_preview; without it, when the preview
+  gave no pose, or when the frame before was not fused, the k-th frame's round runs
+  inline);
 - delayed: computed inline at frame i, applied at pipelined's join frame (pipelined's
   results without a worker).
 
@@ -180,16 +181,19 @@ class RoundScheduler:
         self._global_wanted = True
         self._requests += 1
 
-    def due(self, fused: int, has_pose: bool) -> str | None:
+    def due(self, fused: int, has_pose: bool, previewed: bool = False) -> str | None:
         """The round, if any, that starts at the frame that makes `fused` fused frames:
         where it runs (self.mode's inline, pipelined or delayed, or "preview": on the
         worker, landing at the next frame), or None. Rounds belong to every k-th fused
-        frame; the online mode previews one while there is no pose (module docstring)."""
+        frame; the online mode previews one while there is no pose (module docstring).
+        has_pose: the tracker has one; previewed: a preview's pose is reported."""
         lc = self.settings.localizer
         k = lc.every_k_frames
         if fused % k == 0:
-            # after its preview, the k-th frame's round goes to the worker: a push never runs a round
-            return "pipelined" if self._previewed == fused else self.mode(has_pose)
+            # a preview gave this frame a pose: its own round goes to the worker. A preview
+            # without one (too little evidence on one frame fewer) leaves the round inline,
+            # so the first pose never comes later than inline gives it
+            return "pipelined" if self._previewed == fused and previewed else self.mode(has_pose)
         if (lc.pipeline == "online" and lc.first_fix_preview and (fused + 1) % k == 0
                 and not has_pose and not self._scheduled):
             self._previewed = fused + 1

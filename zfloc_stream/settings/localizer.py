@@ -80,7 +80,9 @@ class LocalizerSettings(Section):
     # frame before each k-th frame, on the worker, and its best mode is reported at the k-th
     # frame, where inline reports the first fix, so no push runs a whole round. The k-th
     # frame's own round then runs on the worker like every later one and lands at the next
-    # frame. The tracker never sees a preview, and a preview frame is never `tracking`.
+    # frame. The tracker never sees a preview, and a preview frame is never `tracking`. A
+    # preview that gives no pose (too little evidence on one frame fewer) leaves the k-th
+    # frame's round inline, so the first pose is never later than inline gives it.
     # false: that round runs inline in the k-th frame's push instead.
     first_fix_preview: bool = True
     worker: Literal["thread", "process"] = "thread"  # pipelined: where the round runs (a process has its own GIL, but pays start-up and copies)
