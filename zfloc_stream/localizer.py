@@ -20,10 +20,10 @@ frames' wall hits.
 
 from __future__ import annotations
 
-import copy
 import time
 import warnings
 from collections import deque
+from copy import deepcopy
 
 import numpy as np
 
@@ -214,7 +214,7 @@ class Localizer:
             return outcome.skipped
         self.last_observation, self.last_result = outcome.observation, outcome.result
         t0 = time.perf_counter()
-        self._preview = copy.deepcopy(self.tracker)
+        self._preview = deepcopy(self.tracker)
         self._preview.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
         timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         return None
