@@ -19,6 +19,7 @@ import numpy as np
 
 from ..config import WallMaskSettings
 from ..frames import WALL
+from ..numba_support import njit
 
 
 def upright_rotation(R_odom_cam: np.ndarray, gravity_odom: np.ndarray) -> np.ndarray:
@@ -71,46 +72,73 @@ def refine_wall_points(
     depth (N,) > 0, is_wall (N,) bool. Returns the kept wall pixels (N,) bool."""
     if not settings.enabled:
         return is_wall.copy()
-    # rotate upright (eq. 2) and warp to the upright image column (eq. 1)
+    # rotate upright (eq. 2); the compiled passes warp to the upright image column (eq. 1)
     up = (rays @ R_up_cam.T.astype(rays.dtype)) * depth[:, None]
-    d_hat = up[:, 2].astype(float)
-    front = d_hat > settings.min_forward_depth
-    kept = np.zeros(len(depth), dtype=bool)
-    is_wall = is_wall & front
-    if not is_wall.any():
-        return kept
-    u_hat = np.zeros(len(depth), dtype=np.int64)
-    u_hat[front] = np.floor(K[0, 0] * up[front, 0] / d_hat[front] + K[0, 2]).astype(np.int64)
-    # shift columns to a compact 0..C-1 range (warped columns may leave the image)
-    column = u_hat - u_hat[front].min()
-    n_cols = int(column[front].max()) + 1
-
-    # deepest non-wall pixel per column
-    other = front & ~is_wall
-    deepest_other = np.full(n_cols, -np.inf)
-    np.maximum.at(deepest_other, column[other], d_hat[other])
-
-    # wall pixels sorted by (column, depth): medians and segments per column in one pass
-    w_idx = np.flatnonzero(is_wall)
-    w_col, w_d = column[w_idx], d_hat[w_idx]
-    # one float key (column-major, then depth) sorts faster than a lexsort
+    w_idx, w_col, w_d, deepest_other = _wall_columns(up, np.ascontiguousarray(is_wall), float(K[0, 0]), float(K[0, 2]),
+                                                     float(settings.min_forward_depth))
+    if len(w_idx) == 0:
+        return np.zeros(len(depth), dtype=bool)
+    # wall pixels sorted by (column, depth): one float key (column-major, then depth) sorts
+    # faster than a lexsort, and numpy's sort beats a compiled one here
     order = np.argsort(w_col * (float(w_d.max()) + 1.0) + w_d)
-    w_idx, w_col, w_d = w_idx[order], w_col[order], w_d[order]
-    starts = np.r_[0, np.flatnonzero(np.diff(w_col)) + 1]
-    counts = np.diff(np.r_[starts, len(w_col)])
-    col_ids = w_col[starts]
-    median = 0.5 * (w_d[starts + (counts - 1) // 2] + w_d[starts + counts // 2])  # eq. 3
+    return _farthest_segments(order, w_idx, w_col, w_d, deepest_other, len(depth), float(settings.tau_d),
+                              float(settings.segment_gap), float(settings.segment_gap_per_m))
 
-    keep_column = deepest_other[col_ids] <= median + settings.tau_d  # eq. 4
-    # depth-separated segments: a new segment starts at each column start or depth gap. The
-    # gap is small (a wall is one depth per column) but grows with depth like the noise;
-    # a large gap would let a wall-labelled furniture top bridge its front face to the wall
-    gap = settings.segment_gap + settings.segment_gap_per_m * w_d[1:]
-    new_segment = np.ones(len(w_d), dtype=bool)
-    new_segment[1:] = (w_col[1:] != w_col[:-1]) | (np.diff(w_d) > gap)
-    segment = np.cumsum(new_segment)
-    # sorted by depth, the farthest segment (largest median, eq. 5) is the column's last
-    last_segment = segment[starts + counts - 1]
-    group = np.repeat(np.arange(len(starts)), counts)
-    kept[w_idx[keep_column[group] & (segment == last_segment[group])]] = True
+
+@njit
+def _wall_columns(up, is_wall, fx, cx, min_forward_depth):
+    """The wall pixels in front of the camera: (index, upright image column shifted to
+    0.., gravity-aligned depth d_hat), and per column the deepest non-wall depth (-inf: none).
+    Columns count from the leftmost pixel in front, wall or not."""
+    n = up.shape[0]
+    column = np.empty(n, np.int64)
+    lo, hi, walls = np.iinfo(np.int64).max, np.iinfo(np.int64).min, 0
+    for i in range(n):
+        d = np.float64(up[i, 2])
+        if d > min_forward_depth:
+            u = np.int64(np.floor(fx * np.float64(up[i, 0]) / d + cx))
+            column[i] = u
+            lo, hi = min(lo, u), max(hi, u)
+            walls += is_wall[i]
+    w_idx = np.empty(walls, np.int64)
+    w_col = np.empty(walls, np.int64)
+    w_d = np.empty(walls, np.float64)
+    deepest_other = np.full(hi - lo + 1 if walls else 0, -np.inf)
+    j = 0
+    for i in range(n):
+        d = np.float64(up[i, 2])
+        if d > min_forward_depth:
+            c = column[i] - lo
+            if is_wall[i]:
+                w_idx[j], w_col[j], w_d[j] = i, c, d
+                j += 1
+            elif d > deepest_other[c]:
+                deepest_other[c] = d
+    return w_idx, w_col, w_d, deepest_other
+
+
+@njit
+def _farthest_segments(order, w_idx, w_col, w_d, deepest_other, n, tau_d, segment_gap, segment_gap_per_m):
+    """Kept wall pixels (n,) bool: per column (a run of `order`), none when a non-wall pixel
+    lies deeper than the median wall depth + tau_d (eqs. 3, 4); else the farthest
+    depth-separated segment (eq. 5). A segment ends where the next depth is farther than the
+    gap, which grows with depth like the noise: a large gap would let a wall-labelled
+    furniture top bridge its front face to the wall."""
+    kept = np.zeros(n, np.bool_)
+    m = len(order)
+    s = 0
+    while s < m:
+        c = w_col[order[s]]
+        e = s + 1
+        while e < m and w_col[order[e]] == c:
+            e += 1
+        count = e - s
+        median = 0.5 * (w_d[order[s + (count - 1) // 2]] + w_d[order[s + count // 2]])
+        if deepest_other[c] <= median + tau_d:
+            t = e - 1  # sorted by depth: the farthest segment is the column's last
+            while t > s and not (w_d[order[t]] - w_d[order[t - 1]] > segment_gap + segment_gap_per_m * w_d[order[t]]):
+                t -= 1
+            for q in range(t, e):
+                kept[w_idx[order[q]]] = True
+        s = e
     return kept
