@@ -286,6 +286,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.laser_scans < 10:
         ap.error(f"--laser-scans must be at least 10, got {args.laser_scans}")
+    if args.switch_interval is not None and not args.switch_interval > 0:
+        ap.error(f"--switch-interval must be a positive number of seconds, got {args.switch_interval}")
     if args.switch_interval:  # how long a thread waiting for the GIL waits before asking for it
         sys.setswitchinterval(args.switch_interval)
     if args.defaults:

@@ -185,7 +185,8 @@ class RoundScheduler:
         """The round, if any, that starts at the frame that makes `fused` fused frames:
         where it runs (self.mode's inline, pipelined or delayed, or "preview": on the
         worker, landing at the next frame), or None. Rounds belong to every k-th fused
-        frame; the online mode previews one while there is no pose (module docstring).
+        frame; the online mode previews one while there is no pose (module docstring), and
+        a preview it returns is remembered until that k-th frame.
         has_pose: the tracker has one; previewed: a preview's pose is reported."""
         lc = self.settings.localizer
         k = lc.every_k_frames
