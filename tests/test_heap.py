@@ -1,11 +1,12 @@
-"""heap.release_free_heap: free heap pages glibc keeps go back to the OS; rounds call it."""
+"""heap.release_free_heap: free heap pages glibc keeps go back to the OS once resident
+memory has grown by the asked amount; rounds call it."""
 
 import ctypes
 import os
 
 import pytest
 
-from zfloc_stream import localizer as localizer_module
+from zfloc_stream import heap, localizer as localizer_module
 from zfloc_stream import round_scheduler
 from zfloc_stream.config import load_settings
 from zfloc_stream.heap import _malloc_trim, release_free_heap
@@ -41,13 +42,33 @@ def test_free_heap_pages_are_returned():
     assert returned > 20, f"only {returned:.1f} MiB of the 31 MiB freed went back"
 
 
+@pytest.mark.skipif(heap._malloc_trim() is None, reason="needs glibc")
+def test_a_release_waits_until_resident_memory_grew_by_the_asked_amount(monkeypatch):
+    resident = [100 * 2**20]
+    trims = []
+    monkeypatch.setattr(heap, "resident_bytes", lambda: resident[0])
+    monkeypatch.setattr(heap, "_malloc_trim", lambda: trims.append)
+    monkeypatch.setattr(heap, "_resident_after_trim", None)
+    growth = 32 * 2**20
+    assert heap.release_free_heap(growth)  # nothing recorded yet: trims, and records 100 MiB
+    resident[0] += growth - 1
+    assert not heap.release_free_heap(growth)
+    assert heap.release_free_heap(0)  # 0: always
+    resident[0] += growth  # 32 MiB above the last trim
+    assert heap.release_free_heap(growth)
+    assert not heap.release_free_heap(growth)
+    monkeypatch.setattr(heap, "resident_bytes", lambda: None)  # no /proc: trims every time
+    assert heap.release_free_heap(growth)
+    assert len(trims) == 4
+
+
 @pytest.mark.parametrize("release", [True, False])
 def test_every_round_releases_the_heap_unless_told_not_to(monkeypatch, release):
     calls = []
-    monkeypatch.setattr(round_scheduler, "release_free_heap", lambda: calls.append(1) or True)
+    monkeypatch.setattr(round_scheduler, "release_free_heap", lambda growth: calls.append(growth) or True)
     scene = build_scene("rooms", seed=0)
     settings = load_settings(overrides=[f"localizer.release_memory={str(release).lower()}", "localizer.pipeline=inline"])
     loc = localizer_module.Localizer(scene.floorplan, settings)
     rounds = sum("primitives" in loc.push(f).timings for f in simulate(scene, SimSettings(), seed=0, n_frames=12))
     assert rounds >= 2
-    assert len(calls) == (rounds if release else 0)
+    assert calls == ([settings.localizer.release_memory_growth * 2**20] * rounds if release else [])

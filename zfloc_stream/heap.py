@@ -1,11 +1,19 @@
-"""Give freed heap memory back to the operating system after each round.
+"""Give freed heap memory back to the operating system once it has piled up.
 
 A round allocates and frees tens of MB of numpy temporaries (scoring chunks, FFT planes).
 glibc raises its mmap threshold each time such a block is freed, so later blocks of that
 size come from the heap, and a heap that freed them keeps its pages: resident memory
 then drifts up and down by tens of MB over a long session without anything leaking
-(measured, benchmarks/bench_localizer.py). malloc_trim(0) returns the free pages; it costs
-about 2 ms on the shared 2-core machine. Elsewhere (no glibc) this does nothing.
+(measured, benchmarks/bench_localizer.py). malloc_trim(0) returns the free pages (about
+2 ms on the shared 2-core machine).
+
+Trimming after every round has a price in the stream's time: it also returns the free
+pages the stream's own fusion reuses every frame, and the push after it faults them back
+in (a camera push at a round's join frame took 8.2 instead of 5.9 ms, median, on the shared
+sessions; docs/performance.md). So a round trims only once the process's resident memory
+has grown by `growth` bytes since the last trim: the drift stays bounded by that much
+and most pushes find their pages warm. Elsewhere (no glibc, no /proc) this does nothing
+or trims every time it is asked.
 """
 
 from __future__ import annotations
@@ -13,6 +21,11 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+import os
+import threading
+
+_lock = threading.Lock()
+_resident_after_trim: int | None = None  # bytes resident right after this process's last trim
 
 
 @functools.cache
@@ -27,10 +40,28 @@ def _malloc_trim():
     return trim
 
 
-def release_free_heap() -> bool:
-    """Return the allocator's free pages to the OS; True where that was possible."""
+def resident_bytes() -> int | None:
+    """The process's resident memory (Linux /proc/self/statm), None where it cannot be read."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def release_free_heap(growth: int = 0) -> bool:
+    """Return the allocator's free pages to the OS if resident memory grew by at least
+    `growth` bytes since the last such release in this process (0: always). True when it
+    trimmed."""
+    global _resident_after_trim
     trim = _malloc_trim()
     if trim is None:
         return False
-    trim(0)
+    with _lock:  # several localizers in one process share the heap and this record
+        if growth > 0 and _resident_after_trim is not None:
+            now = resident_bytes()
+            if now is not None and now - _resident_after_trim < growth:
+                return False
+        trim(0)
+        _resident_after_trim = resident_bytes()
     return True

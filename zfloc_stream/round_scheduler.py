@@ -81,11 +81,11 @@ class ScheduledRound:
 def run_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome:
     """Primitives + estimation of one round: a pure function of its inputs, so it gives the
     same bits on the caller's thread, a worker thread or a worker process. Afterwards the
-    round's freed temporaries go back to the OS (localizer.release_memory)."""
+    freed temporaries go back to the OS once they have piled up (localizer.release_memory)."""
     with threads.limit(threads.resolve(settings.estimator.threads)):
         out = _compute_round(floorplan, settings, job)
     if settings.localizer.release_memory:
-        release_free_heap()
+        release_free_heap(int(settings.localizer.release_memory_growth * 2**20))
     return out
 
 

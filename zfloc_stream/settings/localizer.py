@@ -57,9 +57,12 @@ class LocalizerSettings(Section):
     # own camera (estimation/local_refinement.py).
     odometry_scale: Literal["shared", "metric"] = "shared"
     local_outlier_distance: float = Field(0.0, ge=0, le=100)  # m, refine.outlier_distance of the local fit (0: plain Huber)
-    # after each round, hand the allocator's free pages back to the OS (glibc malloc_trim,
-    # ~2 ms; heap.py): without it resident memory drifts by tens of MB over long sessions
+    # after a round, hand the allocator's free pages back to the OS (glibc malloc_trim,
+    # ~2 ms; heap.py) once resident memory has grown release_memory_growth MiB since the
+    # last time: without it resident memory drifts by tens of MB over long sessions; after
+    # every round (0), the push after it faults the stream's freed pages back in
     release_memory: bool = True
+    release_memory_growth: float = Field(32.0, ge=0, le=1_000_000)  # MiB
     # Where a round runs (round_scheduler.py). online (default, the Localizer API and `run`):
     # on one worker beside the stream, applied exactly join_delay frames later; while no pose
     # exists, a preview round (first_fix_preview) gives the first pose at the frame where
