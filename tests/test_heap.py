@@ -72,3 +72,16 @@ def test_every_round_releases_the_heap_unless_told_not_to(monkeypatch, release):
     rounds = sum("primitives" in loc.push(f).timings for f in simulate(scene, SimSettings(), seed=0, n_frames=12))
     assert rounds >= 2
     assert calls == ([settings.localizer.release_memory_growth * 2**20] * rounds if release else [])
+
+
+@pytest.mark.skipif(heap._malloc_trim() is None, reason="needs glibc")
+def test_malloc_arenas_are_capped_when_rounds_are_scheduled(monkeypatch):
+    asked = []
+    monkeypatch.setattr(round_scheduler, "limit_arenas", lambda count: asked.append(count) or True)
+    scene = build_scene("rooms", seed=0)
+    for count in (2, 0):
+        settings = load_settings(overrides=[f"localizer.malloc_arenas={count}"])
+        localizer_module.Localizer(scene.floorplan, settings).close()
+    assert asked == [2, 0]
+    assert heap.limit_arenas(2)  # glibc takes the cap
+    assert not heap.limit_arenas(0)  # 0: glibc's own choice, nothing set

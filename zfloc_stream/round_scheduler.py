@@ -40,7 +40,7 @@ from .errors import ZflocError
 from .estimation import localize
 from .estimation.results import LocalizationResult
 from .frontend.bev_snapshot import BevSnapshot
-from .heap import release_free_heap
+from .heap import limit_arenas, release_free_heap
 from .observation import BevObservation
 from .rng import make_rng
 from .sim2 import Sim2
@@ -160,6 +160,8 @@ class RoundScheduler:
         self._requests = 0  # how many times it asked
         self._previewed = 0  # the k-th fused frame whose round a preview started ahead of
         lc = settings.localizer
+        # before the worker thread (or the round's helper threads) take arenas of their own
+        limit_arenas(lc.malloc_arenas)
         if lc.pipeline in ("pipelined", "online") and lc.worker == "process":
             self._executor().submit(int)  # start the process now: it takes a second or two to import
 
