@@ -3,11 +3,11 @@ memory given back to the operating system once it has piled up.
 
 glibc gives threads their own malloc arenas (up to 8 per core) and each keeps what its
 thread used at its peak. With the rounds on a worker thread beside the stream, resident
-memory grew by 17-24 MiB per 1,000 frames on the built-in apartment walk (4,000 frames,
-three runs), with no Python object, numpy array or compiled-kernel allocation alive to
-explain it (tracemalloc and numba's allocation counts flat); with one or two arenas
-(MALLOC_ARENA_MAX) it stayed within the first 1,000 frames' level, like the inline path,
-which has no worker. limit_arenas caps them (mallopt(M_ARENA_MAX)) for the whole process:
+memory grew by 16-24 MiB per 1,000 frames over 4,000 frames of the built-in apartment walk
+(three runs; +26 MiB from frame 1,000 to 10,000 in a longer one), with no Python object,
+numpy array or compiled-kernel allocation alive to explain it (tracemalloc and numba's
+allocation counts flat); with one or two arenas (MALLOC_ARENA_MAX) it stayed at the first
+1,000 frames' level, like the inline path, which has no worker. limit_arenas caps them (mallopt(M_ARENA_MAX)) for the whole process:
 it is a process-wide allocator setting, taken when the first Localizer is built
 (localizer.malloc_arenas; 0 leaves glibc's choice).
 

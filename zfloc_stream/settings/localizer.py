@@ -64,7 +64,7 @@ class LocalizerSettings(Section):
     release_memory: bool = True
     release_memory_growth: float = Field(32.0, ge=0, le=1_000_000)  # MiB
     # glibc malloc arenas for the whole process, set when a Localizer is built (heap.py):
-    # per-thread arenas let resident memory grow ~20 MiB per 1,000 frames with the rounds on
+    # per-thread arenas let resident memory grow up to ~20 MiB per 1,000 frames with the rounds on
     # the worker thread; 0 leaves glibc's choice (8 per core)
     malloc_arenas: int = Field(2, ge=0, le=1024)
     # Where a round runs (round_scheduler.py). online (default, the Localizer API and `run`):
