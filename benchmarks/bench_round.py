@@ -19,6 +19,7 @@ worker thread; --process adds a worker process). Frames are rendered before timi
     python benchmarks/bench_round.py                # more scenes, frames and windows
     python benchmarks/bench_round.py --defaults --rate 0      # the package defaults on real data
     PYTHONPATH=../main python benchmarks/bench_round.py --defaults --rate 0   # another checkout's
+    python benchmarks/bench_round.py --defaults --rate 10 --frame-kinds       # join / start / plain frames apart
 
 --defaults (issue 25): push latency with the defaults through the Python API on the shared
 camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior) and two 50-scan
@@ -265,7 +266,20 @@ def defaults_latency(frames, floorplan, overrides, rate: float) -> dict:
     first = next((i for i, e in enumerate(estimates) if e.pose is not None), None)
     after = w[first + 1:] if first is not None and first + 1 < len(w) else w[:0]
     return {"median": np.median(w), "p99": np.percentile(w, 99), "amortized": w.sum() / len(w), "first": first,
-            "p99_after": np.percentile(after, 99) if len(after) else np.nan, "slowest": int(np.argmax(w)), "max": w.max()}
+            "p99_after": np.percentile(after, 99) if len(after) else np.nan, "slowest": int(np.argmax(w)), "max": w.max(),
+            "kinds": frame_kinds(w, estimates)}
+
+
+def frame_kinds(walls: np.ndarray, estimates) -> dict[str, tuple]:
+    """Pushes by what they did: a round landed ("join": its stage timings are there), a
+    round started on the worker ("start"), neither ("plain"); per kind the count, median
+    and max push and median fusion (ms)."""
+    kinds: dict[str, list] = {"join": [], "start": [], "plain": []}
+    for t, e in zip(walls, estimates):
+        kind = "join" if "primitives" in e.timings else "start" if "round_start" in e.timings else "plain"
+        kinds[kind].append((t, 1000 * e.timings.get("fusion", 0.0)))
+    return {k: (len(v), np.median([a for a, _ in v]), max(a for a, _ in v), np.median([b for _, b in v]))
+            for k, v in kinds.items() if v}
 
 
 def main() -> None:
@@ -283,6 +297,8 @@ def main() -> None:
     ap.add_argument("--laser-scans", type=int, default=50,
                     help="--defaults: scans per laser window (default 50; a longer window shows the p99 of a steady "
                          "stream)")
+    ap.add_argument("--frame-kinds", action="store_true",
+                    help="--defaults: also push and fusion times of the frames where a round lands, starts, or neither")
     args = ap.parse_args()
     if args.laser_scans < 10:
         ap.error(f"--laser-scans must be at least 10, got {args.laser_scans}")
@@ -300,6 +316,9 @@ def main() -> None:
             print(f"  {name:34s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  amortized {s['amortized']:6.1f}  "
                   f"first pose at frame {s['first']}  p99 after it {s['p99_after']:6.1f}  "
                   f"slowest: frame {s['slowest']} ({s['max']:.1f})", flush=True)
+            if args.frame_kinds:
+                print("    " + "; ".join(f"{k} x{n}: push median {m:.1f} max {x:.1f}, fusion median {f:.1f}"
+                                         for k, (n, m, x, f) in s["kinds"].items()), flush=True)
         return
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
     if not args.skip_stages:
