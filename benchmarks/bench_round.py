@@ -21,107 +21,11 @@ worker thread; --process adds a worker process). Frames are rendered before timi
     PYTHONPATH=../main python benchmarks/bench_round.py --defaults --rate 0   # another checkout's
     python benchmarks/bench_round.py --defaults --rate 10 --frame-kinds       # join / start / plain frames apart
 
---defaults (issue 25): push latency with the defaults through the Python API on the shared
-camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior) and two 50-scan
-Carmen laser windows (fhw, intel; fixed scale), one warm-up pass. Measured on 2026-12-03 on
-the shared 2-core machine at load average 7-7.7 (other jobs), new defaults (online,
-compiled kernels) against the commit before (4c13297: inline, numpy), ms:
-
-    frames back to back     median        p99          amortized    first pose
-    belgioioso camera       19.3 -> 40.6  937 -> 243   159 -> 63    4 -> 4
-    fhw camera              17.3 -> 35.7  891 -> 279   137 -> 67    4 -> 4
-    laser fhw               10.0 -> 23.9  583 -> 700    96 -> 90    4 -> 4
-    laser intel             11.0 -> 19.0  447 -> 256    80 -> 46    4 -> 4
-    at 10 Hz
-    belgioioso camera        7.9 -> 16.4  346 -> 156    59 -> 24    4 -> 4
-    fhw camera              12.1 -> 17.4  502 -> 107    87 -> 22    4 -> 4
-    laser fhw                9.0 -> 4.2   661 -> 219   102 -> 16    4 -> 4
-    laser intel              3.9 -> 3.8   562 -> 109    85 -> 13    4 -> 4
-
-A second back-to-back run at load average 10.6-11.1 (old -> new, median / p99 / amortized):
-belgioioso camera 11.7 -> 19.7 / 668 -> 150 / 97 -> 37; fhw camera 11.9 -> 51.6 / 541 ->
-498 / 85 -> 95; laser fhw 11.3 -> 16.1 / 611 -> 674 / 92 -> 59; laser intel 9.7 -> 13.4 /
-446 -> 176 / 79 -> 29. Under this load the runs vary by 2x; fhw camera was worse this time.
-The first pose lands at the same frame. The p99 of 50 frames is set by the one or two
-rounds that ran inline before the first pose (until 2026-12-04; now a preview round on the
-worker gives that pose, docs/performance.md);
-back to back, a join also waits for the worker's round, and the median grows because the
-worker shares the two loaded cores with the stream. The issue's targets (p99 <= 15 ms,
-amortized <= 10 ms, quiet machine) were not reached here; this machine was never quiet.
-
-Measured on the shared 2-core machine under load average 6-7 from other jobs (so walls are
-~1.5x CPU), `--quick`: a round (wall median) takes 180 ms on the apartment camera, 340 ms on
-the office laser, 360-610 ms on the aces / belgioioso camera sessions (fixed, prior, free
-scale) and 500 ms on an Intel Carmen window; fusion 8 ms (camera 160x120), 1 ms (laser).
-Push latency, 640x480, 60 frames (`--quick --skip-stages --latency-frames 60 --rate R`):
-
-    rate   labels      mode               median   p99    max  (ms)
-    10 Hz  labels      inline               8.8   223    235
-    10 Hz  labels      pipelined thread     9.4    31     45
-    10 Hz  labels      pipelined process    8.8    22     34
-    10 Hz  geometric   inline              10.0   206    218
-    10 Hz  geometric   pipelined thread    13.8    53     57
-    10 Hz  geometric   pipelined process   10.8    27     38
-    30 Hz  labels      pipelined thread    12.2   155    164   (rounds longer than 5 frames: joins wait)
-
-Again on a quiet machine (load average 0.9, same command at 10 Hz, after the torch backend
-and heap trimming; the push path is otherwise unchanged):
-
-    10 Hz  labels      inline               5.8   186    283
-    10 Hz  labels      pipelined thread     7.4    13     14
-    10 Hz  labels      pipelined process    6.6    17     18
-    10 Hz  geometric   inline               9.4   151    160
-    10 Hz  geometric   pipelined thread    11.0    26     26
-    10 Hz  geometric   pipelined process    9.8    17     17
-
-After the correlative rotation prefilter and the 3L scale pre-check (rounds ~30% shorter),
-load average 0.4-0.6, the same command 4 times (p99 of each run, ms):
-
-    labels      pipelined thread    14.7   7.2   9.2  11.0
-    labels      pipelined process   11.8   7.2  10.0  11.8
-    geometric   pipelined thread    11.4   9.5  14.6  14.3
-    geometric   pipelined process   12.2  14.6  13.9  15.4
-    (inline: p99 73-100 ms, the round)
-
-There the slowest pipelined pushes are the start / join frames: fusion (~6 ms) plus the
-tracker update and local refinement of the join (~4 ms, `tracking`) plus the BEV copy of the
-start (~1 ms). Joining one frame before the next start (`--set localizer.join_delay=4`) did
-not change the p99 (13.2 ms thread, labels).
-
-With the compiled kernels (issue 10, `--set estimator.kernels=numba`) against numpy, the same
-command alternated twice each, load average 0.4-0.65 (p99 of each run, ms):
-
-                                  numpy        numba
-    labels      pipelined thread    9.5   9.4   11.6   7.9
-    labels      pipelined process  11.8  12.8    7.8  12.3
-    geometric   pipelined thread   12.0  10.8   12.4  10.4
-    geometric   pipelined process  12.3  11.8   10.2  11.8
-    (inline p99: numpy 83-95 ms; numba 29-32 ms geometric, 112-120 ms labels: that first
-    run of the process loads the kernels from numba's cache in its first round, max 229 ms)
-
-Pipelined pushes cost fusion (4-6 ms median) whatever the round costs; their p99 sits at
-8-13 ms either way, so the kernels change the inline push, not the pipelined one.
-
-With the round's threads (`estimator.threads`, auto: a pipelined round keeps to one core of
-the two, an inline one takes both), `--quick --skip-stages --latency-frames 60 --rate 10
---process --set estimator.kernels=numba`, load average 0.9, p99 (max) in ms, auto and then
-`--set estimator.threads=2` (the pipelined round on both cores):
-
-                                  auto          threads=2
-    labels      pipelined thread   8.7 (8.9)     8.8 (9.6)
-    labels      pipelined process  8.7 (8.8)     9.3 (10.7)
-    geometric   pipelined thread  11.6 (11.7)   15.1 (20.3)
-    geometric   pipelined process 13.4 (19.7)   10.3 (12.3)
-    (inline: labels 118 / 117 ms p99, the first round loading the kernels; geometric 31.6 /
-    30.1 ms)
-
-A round on both cores slowed the stream's geometric pushes in one run of two, hence auto
-leaves the stream its core.
-
-At 30 Hz a round (130-230 ms here) is longer than k = 5 frames, so the join waits and
-pipelining cannot help; it needs round time < k / rate (raise every_k_frames or join_delay,
-or fewer RANSAC iterations). The worst pipelined pushes are fusion frames slowed by the
-worker (CPU and GIL), not the start / join frames (max 13-18 ms at 10 Hz).
+--defaults (issue 25): push latency with the package defaults through the Python API on
+the shared camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior) and two
+50-scan Carmen laser windows (fhw, intel; fixed scale), one warm-up pass: median, p99,
+amortized, the first frame with a pose and the slowest push. Measurements, with their date
+and commit, are in docs/performance.md (this script's earlier ones too).
 """
 
 from __future__ import annotations
