@@ -15,8 +15,7 @@ from zfloc_stream.sim.simulator import SimSettings, simulate
 
 
 def _rss_mib() -> float:
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    return heap.resident_bytes() / 2**20
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/statm") or _malloc_trim() is None, reason="needs Linux with glibc")

@@ -7,9 +7,9 @@ memory grew by 16-24 MiB per 1,000 frames over 4,000 frames of the built-in apar
 (three runs; +26 MiB from frame 1,000 to 10,000 in a longer one), with no Python object,
 numpy array or compiled-kernel allocation alive to explain it (tracemalloc and numba's
 allocation counts flat); with one or two arenas (MALLOC_ARENA_MAX) it stayed at the first
-1,000 frames' level, like the inline path, which has no worker. limit_arenas caps them (mallopt(M_ARENA_MAX)) for the whole process:
-it is a process-wide allocator setting, taken when the first Localizer is built
-(localizer.malloc_arenas; 0 leaves glibc's choice).
+1,000 frames' level, like the inline path, which has no worker. limit_arenas caps them
+(mallopt(M_ARENA_MAX)): a process-wide allocator setting, taken when a Localizer's round
+scheduler is built (localizer.malloc_arenas; 0 leaves glibc's choice).
 
 A round allocates and frees tens of MB of numpy temporaries (scoring chunks, FFT planes).
 glibc raises its mmap threshold each time such a block is freed, so later blocks of that
@@ -39,33 +39,37 @@ _lock = threading.Lock()
 _resident_after_trim: int | None = None  # bytes resident right after this process's last trim
 
 
+_M_ARENA_MAX = -8  # mallopt's parameter number in glibc's malloc.h
+
+
 @functools.cache
-def _malloc_trim():
+def _glibc():
+    """The C library's malloc_trim and mallopt, typed; None where they are missing (musl,
+    macOS, Windows)."""
     name = ctypes.util.find_library("c")
     try:
-        trim = ctypes.CDLL(name).malloc_trim if name else None
-    except (OSError, AttributeError):  # not glibc (musl, macOS, Windows)
+        libc = ctypes.CDLL(name) if name else None
+        trim, mallopt = (libc.malloc_trim, libc.mallopt) if libc is not None else (None, None)
+    except (OSError, AttributeError):
         return None
-    if trim is not None:
-        trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
-    return trim
+    if trim is None:
+        return None
+    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return trim, mallopt
 
 
-_M_ARENA_MAX = -8  # mallopt's parameter number in glibc's malloc.h
+def _malloc_trim():
+    return None if _glibc() is None else _glibc()[0]
 
 
 @functools.cache
 def limit_arenas(count: int) -> bool:
     """At most `count` malloc arenas in this process from now on (glibc; once per count).
     True where the allocator took it."""
-    if count <= 0 or _malloc_trim() is None:  # not glibc: nothing to set
+    if count <= 0 or _glibc() is None:  # 0: glibc's own choice; not glibc: nothing to set
         return False
-    try:
-        mallopt = ctypes.CDLL(ctypes.util.find_library("c")).mallopt
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
-    return mallopt(_M_ARENA_MAX, int(count)) == 1
+    return _glibc()[1](_M_ARENA_MAX, int(count)) == 1
 
 
 def resident_bytes() -> int | None:
