@@ -64,3 +64,73 @@ def test_missing_and_malformed_config_files(tmp_path):
     bad.write_text("- a list\n")
     with pytest.raises(ConfigError, match="mapping"):
         load_settings(bad)
+
+
+# Issue 44: hostile settings files and values (one line each, nothing echoed, fast).
+ALIAS_BOMB = "a: &a [x,x,x,x,x,x,x,x,x,x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [{','.join(['*' + chr(97 + i)] * 10)}]\n" for i in range(8)
+)
+
+
+def test_alias_bombs_are_refused_without_expanding_them(tmp_path):
+    path = tmp_path / "bomb.yaml"
+    path.write_text(ALIAS_BOMB)
+    with pytest.raises(ConfigError, match="expands to more than"):
+        load_settings(path)
+    flow = "{" + ALIAS_BOMB.strip().replace("\n", ", ") + "}"
+    with pytest.raises(ConfigError, match="expands to more than"):
+        load_settings(None, [f"seed={flow}"])
+
+
+def test_self_containing_yaml_is_refused():
+    with pytest.raises(ConfigError, match="nested deeper"):
+        load_settings(None, ["seed=&a [*a]"])
+
+
+@pytest.mark.parametrize("special", ["/dev/zero", "fifo", "folder"])
+def test_config_that_is_not_a_regular_file_is_refused_at_once(tmp_path, special):
+    import os
+
+    if special == "fifo":
+        path = tmp_path / "fifo"
+        os.mkfifo(path)
+    elif special == "folder":
+        path = tmp_path
+    else:
+        path = Path(special)
+    with pytest.raises(ConfigError) as err:
+        load_settings(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_oversized_config_is_refused_before_parsing(tmp_path):
+    path = tmp_path / "big.yaml"
+    path.write_text("".join(f"k{i}: {i}\n" for i in range(100_000)))
+    with pytest.raises(ConfigError, match="byte limit"):
+        load_settings(path)
+
+
+def test_errors_never_echo_a_foreign_files_contents(tmp_path):
+    path = tmp_path / "shadow"
+    path.write_text("root:$6$secrethash:19000:0:99999:7:::\ndaemon:*:19000:0:99999:7:::\n")
+    with pytest.raises(ConfigError) as err:
+        load_settings(path)
+    message = str(err.value).replace(str(path), "PATH")
+    assert "secrethash" not in message and "root" not in message
+    path.write_text("estimator:\n  foo: [1, 2\n secret_value: 3\n")
+    with pytest.raises(ConfigError) as err:
+        load_settings(path)
+    assert "secret_value" not in str(err.value) and "line 3" in str(err.value)
+
+
+@pytest.mark.parametrize("value", ["0", "-0.0", "'off'", "'no'", "1", "!!binary aGVsbG8="])
+def test_on_off_settings_take_true_or_false_only(value):
+    with pytest.raises(ConfigError, match="must be true or false"):
+        load_settings(None, [f"logging.background={value}"])
+    assert load_settings(None, ["logging.background=false"]).logging.background is False
+
+
+@pytest.mark.parametrize("value", ["0x10", "0b11", "!!binary MTY="])
+def test_integer_settings_refuse_hex_binary_and_bytes(value):
+    with pytest.raises(ConfigError, match="must be a number"):
+        load_settings(None, [f"seed={value}"])

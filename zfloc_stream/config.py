@@ -23,7 +23,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, Field, ValidationError
 
-from .documents import MAX_NESTING, TooDeep, load_yaml, too_deep
+from .documents import MAX_NESTING, DocumentRefused, TooDeep, load_yaml, read_document_text, too_deep, yaml_problem
 from .errors import ConfigError
 from .settings.base import Section
 from .settings.estimation import (  # noqa: F401 - re-exported: callers import every section from here
@@ -161,11 +161,19 @@ def _short(value: object) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+# What a setting's name looks like; a key unlike it is never echoed in an error.
+_SETTING_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
+
+
 def _format_validation_error(err: ValidationError, source: str) -> str:
     first = err.errors()[0]
     parts = tuple(first["loc"])
     loc = ".".join(str(p) for p in parts) or "<root>"
     if first["type"] == "extra_forbidden":
+        if not all(isinstance(p, int) or _SETTING_NAME.fullmatch(p) for p in parts):
+            # not a name any setting could have: the file is likely not a settings file at
+            # all (say /etc/shadow), and its keys are its contents: never echo them
+            return f"{source}: has a key that is not a setting name (is it a settings file? see configs/default.yaml)"
         return f"{source}: unknown setting '{loc}'" + _suggest_key(parts)
     if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
         ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
@@ -206,13 +214,17 @@ def load_settings(
         path = Path(path)
         source = str(path)
         try:
-            loaded = load_yaml(path.read_text()) or {}
+            loaded = load_yaml(read_document_text(path)) or {}
         except TooDeep as err:
             raise ConfigError(f"{path}: settings {err} (no setting needs more than a few)") from None
+        except DocumentRefused as err:
+            raise ConfigError(f"config file {path} {err}" if str(err).startswith("is ") else f"config file {path}: {err}") from None
         except FileNotFoundError:
             raise ConfigError(f"config file not found: {path}") from None
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-            raise ConfigError(f"cannot read config file {path}: {err}".splitlines()[0]) from None
+        except OSError as err:
+            raise ConfigError(f"cannot read config file {path}: {err.strerror or type(err).__name__}") from None
+        except yaml.YAMLError as err:
+            raise ConfigError(f"config file {path} is not valid YAML: {yaml_problem(err)}") from None
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: top level must be a mapping")
         data = merge_nested(data, loaded)
@@ -227,6 +239,8 @@ def load_settings(
                 value = load_yaml(raw)
             except TooDeep as err:
                 raise ConfigError(f"override '{key.strip()}': value {err} (no setting needs more than a few)") from None
+            except DocumentRefused as err:
+                raise ConfigError(f"override '{key.strip()}': value {err}") from None
             except yaml.YAMLError:
                 raise ConfigError(f"override '{item}': value is not valid YAML") from None
             data = merge_nested(data, dotted_to_nested(key.strip(), value))

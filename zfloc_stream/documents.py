@@ -1,6 +1,8 @@
-"""Checks on parsed user documents (YAML, JSON) before anything walks them: how deep they
-nest, and whether a value is a real number (not a bool, not a string YAML happened to
-read as a number).
+"""Checks on user documents (YAML, JSON) before anything walks them: that the file is a
+regular file of a sane size (a FIFO blocks forever, /dev/zero never ends), how deep they
+nest, how many nodes they expand to (YAML aliases share one node; a walker expands each use),
+and whether a value is a real number (not a bool, not a string YAML happened to read as a
+number).
 
 Python's parsers and every recursive walker after them (pydantic, shapely, our own) fail
 with a RecursionError thousands of lines long on a document nested a few hundred levels
@@ -12,7 +14,10 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import re
+import stat
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -21,26 +26,74 @@ import yaml
 # coordinates inside a Feature inside a FeatureCollection (~8 levels), settings (~6).
 MAX_NESTING = 64
 
+# Most nodes a YAML document may expand to, each use of an alias counted in full (what a
+# validator or a merge walks). A settings file has ~400, a map YAML ~10; a "billion laughs"
+# file of 100 bytes expands to 10^9 and took minutes to refuse.
+MAX_EXPANDED_NODES = 100_000
+
+# Largest settings / map YAML file read (bytes). configs/default.yaml is 7 KB; PyYAML parses
+# ~100 KB/s here, so this bounds the parse to a few seconds.
+MAX_YAML_BYTES = 256 * 1024
+
+
+class DocumentRefused(ValueError):
+    """A user document refused before or right after parsing; the message names the
+    problem, never the document's contents."""
+
+
+class TooDeep(DocumentRefused):
+    """A document nested deeper than MAX_NESTING (found before or while parsing)."""
+
+
+class TooLarge(DocumentRefused):
+    """A document (or its file) over a size or expansion limit."""
+
+
+def _children(item):
+    if isinstance(item, dict):
+        return list(item.values())
+    if isinstance(item, (list, tuple)):
+        return list(item)
+    return None
+
+
+def document_extent(value) -> tuple[float, float]:
+    """(depth, expanded node count) of nested lists / tuples / dicts (a scalar: (0, 1)).
+    Shared sub-documents (YAML aliases) are walked once and counted at every use; a
+    document that contains itself is infinitely deep and large. Iterative: no recursion
+    limit."""
+    memo: dict[int, tuple[float, float]] = {}
+    open_ids: set[int] = set()
+    stack = [(value, False)]
+    while stack:
+        item, children_done = stack.pop()
+        kids = _children(item)
+        if kids is None:
+            continue
+        key = id(item)
+        if children_done:
+            open_ids.discard(key)
+            depth, nodes = 1.0, 1.0
+            for kid in kids:
+                kid_depth, kid_nodes = memo.get(id(kid), (0.0, 1.0)) if _children(kid) is not None else (0.0, 1.0)
+                depth, nodes = max(depth, kid_depth + 1), nodes + kid_nodes
+            memo[key] = (depth, nodes)
+            continue
+        if key in memo:
+            continue
+        if key in open_ids:  # reached again while its own children are open: a cycle
+            return math.inf, math.inf
+        open_ids.add(key)
+        stack.append((item, True))
+        stack.extend((kid, False) for kid in kids if _children(kid) is not None)
+    return memo.get(id(value), (0.0, 1.0))
+
 
 def nesting_depth(value, limit: int = MAX_NESTING) -> int:
-    """Depth of nested lists / tuples / dicts (a scalar is 0), walked without recursion;
-    stops counting once past `limit` (returns limit + 1)."""
-    deepest = 0
-    stack = [(value, 0)]
-    while stack:
-        item, depth = stack.pop()
-        if isinstance(item, dict):
-            children = item.values()
-        elif isinstance(item, (list, tuple)):
-            children = item
-        else:
-            continue
-        depth += 1
-        deepest = max(deepest, depth)
-        if deepest > limit:
-            return limit + 1
-        stack.extend((child, depth) for child in children)
-    return deepest
+    """Depth of nested lists / tuples / dicts (a scalar is 0); limit + 1 when deeper than
+    `limit` (or self-containing)."""
+    depth = document_extent(value)[0]
+    return limit + 1 if depth > limit else int(depth)
 
 
 def too_deep(value, limit: int = MAX_NESTING) -> bool:
@@ -61,16 +114,18 @@ def real_number(value) -> float | None:
 class YamlLoader(yaml.SafeLoader):
     """PyYAML's safe loader read the way a person means a number: `1e-3` is a float (YAML
     1.1 wants a dot: `1e-3` would be text), while YAML 1.1's base-60 numbers
-    (`12:30:45` = 45045) and leading-zero octals (`010` = 8) stay text, so a number field
-    refuses them instead of taking a number nobody wrote."""
+    (`12:30:45` = 45045), leading-zero octals (`010` = 8), hexadecimal (`0x10` = 16) and
+    binary (`0b11`) stay text, so a number field refuses them instead of taking a number
+    nobody meant."""
 
 
 _OCTAL = re.compile(r"[-+]?0[0-7_]+")
+_HEX_OR_BINARY = re.compile(r"[-+]?0[xXbB][0-9a-fA-F_]+")
 
 
 def _int_or_text(loader, node):
     text = node.value
-    if ":" in text or _OCTAL.fullmatch(text):
+    if ":" in text or _OCTAL.fullmatch(text) or _HEX_OR_BINARY.fullmatch(text):
         return text
     return yaml.SafeLoader.construct_yaml_int(loader, node)
 
@@ -92,6 +147,8 @@ def text_number_hint(value: str) -> str:
         return " (YAML 1.1 reads it in base 60)"
     if _OCTAL.fullmatch(value):
         return " (YAML 1.1 reads it as octal)"
+    if _HEX_OR_BINARY.fullmatch(value):
+        return " (YAML 1.1 reads it as hexadecimal or binary)"
     return ""
 
 
@@ -114,21 +171,75 @@ def flow_depth(text: str) -> int:
     return deepest
 
 
-class TooDeep(ValueError):
-    """A document nested deeper than MAX_NESTING (found before or while parsing)."""
-
-
 def load_yaml(text: str):
-    """YAML read with YamlLoader; TooDeep when it nests deeper than MAX_NESTING."""
+    """YAML read with YamlLoader; TooDeep when it nests deeper than MAX_NESTING, TooLarge
+    when it is over MAX_YAML_BYTES or expands (aliases included) past MAX_EXPANDED_NODES."""
+    if len(text) > MAX_YAML_BYTES:
+        raise TooLarge(f"{len(text)} characters, over the {MAX_YAML_BYTES}-byte limit for a YAML document")
     if flow_depth(text) > MAX_NESTING:
         raise TooDeep(f"nested deeper than {MAX_NESTING} levels")
     try:
         data = yaml.load(text, Loader=YamlLoader)
     except RecursionError:
         raise TooDeep("nested deeper than the YAML parser can follow") from None
-    if too_deep(data):
+    depth, nodes = document_extent(data)
+    if depth > MAX_NESTING:
         raise TooDeep(f"nested deeper than {MAX_NESTING} levels")
+    if nodes > MAX_EXPANDED_NODES:
+        raise TooLarge(
+            f"expands to more than {MAX_EXPANDED_NODES} values (YAML aliases counted at each use): no settings or map file needs that many"
+        )
     return data
 
 
-__all__ = ["MAX_NESTING", "TooDeep", "YamlLoader", "flow_depth", "load_yaml", "nesting_depth", "real_number", "text_number_hint", "too_deep"]
+def yaml_problem(err: yaml.YAMLError) -> str:
+    """A parser error as 'PROBLEM at line L, column C', without the quoted lines PyYAML adds
+    (they are the file's contents, which an error never echoes)."""
+    problem = getattr(err, "problem", None) or "cannot be parsed"
+    mark = getattr(err, "problem_mark", None)
+    return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else problem
+
+
+def read_document_text(path: str | Path, max_bytes: int = MAX_YAML_BYTES) -> str:
+    """A user document's text, read only when it is a regular file of at most max_bytes in
+    UTF-8: a FIFO would block forever and /dev/zero never ends. FileNotFoundError when it
+    does not exist; DocumentRefused (the path's problem, never its contents) otherwise."""
+    path = Path(path)
+    info = os.stat(path)  # FileNotFoundError passes through: callers word "not found" their way
+    if stat.S_ISDIR(info.st_mode):
+        raise DocumentRefused("is a folder, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise DocumentRefused("is not a regular file (a pipe, socket or device): give a file")
+    if info.st_size > max_bytes:
+        raise TooLarge(f"is {info.st_size} bytes, over the {max_bytes}-byte limit for this kind of file")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)  # the file may have grown since the stat
+    except OSError as err:
+        raise DocumentRefused(f"cannot be read: {err.strerror or type(err).__name__}") from None
+    if len(data) > max_bytes:
+        raise TooLarge(f"is over the {max_bytes}-byte limit for this kind of file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise DocumentRefused(f"is not UTF-8 text (byte {err.start} cannot be decoded)") from None
+
+
+__all__ = [
+    "MAX_EXPANDED_NODES",
+    "MAX_NESTING",
+    "MAX_YAML_BYTES",
+    "DocumentRefused",
+    "TooDeep",
+    "TooLarge",
+    "YamlLoader",
+    "document_extent",
+    "flow_depth",
+    "load_yaml",
+    "nesting_depth",
+    "read_document_text",
+    "real_number",
+    "text_number_hint",
+    "too_deep",
+    "yaml_problem",
+]

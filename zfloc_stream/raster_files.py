@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 
 from .config import Settings
-from .documents import TooDeep, load_yaml, real_number
+from .documents import DocumentRefused, TooDeep, load_yaml, read_document_text, real_number, yaml_problem
 from .errors import FloorplanError
 
 
@@ -180,11 +180,15 @@ MAP_YAML_SUFFIXES = (".yaml", ".yml")
 def read_map_yaml(path: Path):
     """The parsed map YAML (a ROS map, or a vector plan's `vector:` YAML), or a one-line
     FloorplanError."""
-    if not path.is_file():
+    if not path.exists():
         raise FloorplanError(f"floorplan YAML not found: {path}")
     try:
-        return load_yaml(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-        raise FloorplanError(f"cannot parse floorplan YAML {path}: {str(err).splitlines()[0]}") from None
+        return load_yaml(read_document_text(path))
     except TooDeep as err:
         raise FloorplanError(f"{path}: {err} (a map YAML is a flat mapping)") from None
+    except DocumentRefused as err:
+        raise FloorplanError(f"floorplan YAML {path} {err}" if str(err).startswith("is ") else f"floorplan YAML {path}: {err}") from None
+    except OSError as err:
+        raise FloorplanError(f"cannot read floorplan YAML {path}: {err.strerror or type(err).__name__}") from None
+    except yaml.YAMLError as err:
+        raise FloorplanError(f"cannot parse floorplan YAML {path}: {yaml_problem(err)}") from None

@@ -13,29 +13,61 @@ import sys
 import typing
 from typing import Annotated
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, model_validator
 from pydantic_core import PydanticCustomError
 
 from ..documents import text_number_hint
 
 
+def _plain(annotation):
+    """A field (or a list's item) annotation without its Annotated metadata."""
+    return typing.get_args(annotation)[0] if typing.get_origin(annotation) is Annotated else annotation
+
+
 def _numeric(annotation) -> bool:
     """Whether a field (or a list's item) annotation is int or float."""
-    if typing.get_origin(annotation) is Annotated:
-        annotation = typing.get_args(annotation)[0]
-    return annotation in (int, float)
+    return _plain(annotation) in (int, float)
 
 
 def _number_problem(value) -> str | None:
     """Why a value given for a number setting is not one: pydantic would read True as 1,
-    the text '5' as 5, and a subnormal float (4.9e-324) passes every `gt=0`."""
-    if isinstance(value, bool):
+    the text '5' as 5, bytes (YAML's !!binary) as digits, and a subnormal float (4.9e-324)
+    passes every `gt=0`."""
+    if isinstance(value, (bool, np.bool_)):
         return "must be a number, not a boolean (true/false)"
     if isinstance(value, str):
         return f"must be a number, got text{text_number_hint(value)}: write the number itself"
+    if isinstance(value, (bytes, bytearray)):  # pydantic reads b"12" as 12; lists etc. it refuses itself, with the range
+        return f"must be a number, got {_kind(value)}"
     if isinstance(value, float) and value != 0 and abs(value) < sys.float_info.min:
         return f"is a subnormal number (below {sys.float_info.min:.3g}): no setting means anything that small"
     return None
+
+
+def _bool_problem(value) -> str | None:
+    """Why a value given for an on/off setting is not true or false: pydantic would read
+    0, -0.0, "off" and "no" as False."""
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    if isinstance(value, str):
+        return "must be true or false, got text: write true or false without quotes"
+    return f"must be true or false, got {_kind(value)}"
+
+
+def _kind(value) -> str:
+    """A value's kind in a user's words (never its contents: it may come from any file)."""
+    if isinstance(value, (bool, np.bool_)):
+        return "a boolean"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return "a number"
+    if isinstance(value, (bytes, bytearray)):
+        return "binary data"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, (list, tuple)):
+        return "a list"
+    return f"a {type(value).__name__} value"
 
 
 class Section(BaseModel):
@@ -45,7 +77,8 @@ class Section(BaseModel):
     @model_validator(mode="before")
     @classmethod
     def numbers_are_numbers(cls, data):
-        """Number settings take numbers only: no booleans, no text, no subnormals."""
+        """Number settings take numbers only (no booleans, no text, no subnormals) and
+        on/off settings take true or false only."""
         if not isinstance(data, dict):
             return data
         for name, info in cls.model_fields.items():
@@ -54,6 +87,8 @@ class Section(BaseModel):
             value, annotation = data[name], info.annotation
             if _numeric(annotation):
                 problem = _number_problem(value)
+            elif _plain(annotation) is bool:
+                problem = _bool_problem(value)
             elif typing.get_origin(annotation) is list and _numeric(typing.get_args(annotation)[0]) and isinstance(value, list):
                 problem = next((f"item {i} {p}" for i, p in ((i, _number_problem(v)) for i, v in enumerate(value)) if p), None)
             else:

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from ..documents import load_yaml, read_document_text
 from ..config import Settings, dotted_to_nested, load_settings, merge_nested
 from ..errors import ConfigError
 
@@ -59,10 +59,10 @@ def user_overrides(config: str | Path | None = None, sets: Iterable[str] = ()) -
     load_settings(config, list(sets))  # raises ConfigError with a clear message
     data: dict = {}
     if config is not None:
-        data = yaml.safe_load(Path(config).read_text()) or {}
-    for item in sets:
+        data = load_yaml(read_document_text(config)) or {}
+    for item in sets:  # read as load_settings read them (1e-3 a number, 0x10 text)
         key, raw = item.split("=", 1)
-        data = merge_nested(data, dotted_to_nested(key.strip(), yaml.safe_load(raw)))
+        data = merge_nested(data, dotted_to_nested(key.strip(), load_yaml(raw)))
     return data
 
 
