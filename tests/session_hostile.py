@@ -1,0 +1,104 @@
+"""Session files written the way another tool (or an attacker) might: messages grouped by
+topic or shuffled in the file, depth in millimetres as float32 or mislabelled, lens
+distortion, huge log times and poses. Used by tests/test_session_hostile.py and the
+session fuzz test (tests/test_session_fuzz.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from zfloc_stream.session import schemas as S
+
+CLASSES = {S.TOPIC_ODOMETRY: PoseInFrame, S.TOPIC_GROUND_TRUTH: PoseInFrame, S.TOPIC_CALIBRATION: CameraCalibration,
+           S.TOPIC_DEPTH: RawImage, S.TOPIC_LABELS: RawImage, S.TOPIC_SCAN: LaserScan}
+ORDERS = ("time", "topic", "reversed-topic", "shuffled")
+
+
+def frame_messages(frames, depth_scale: float = 1.0, depth_encoding: str = "32FC1", distortion=None,
+                   model: str = "plumb_bob", pose_edit=None, labels: bool = True) -> list[tuple[str, int, object]]:
+    """(topic, log time ns, message) of camera or laser frames, in recording order; log
+    time = header stamp + 5 ms. depth_scale multiplies depth (1000: millimetres) before it is
+    stored as `depth_encoding` ('32FC1', '16UC1', or '16UC1-over-float': float32 bytes
+    declared 16UC1). distortion: the calibration's D. pose_edit(i, T) -> T edits odometry."""
+    out = []
+    for i, fr in enumerate(frames):
+        ns = S.seconds_to_ns(fr.timestamp)
+        T = fr.T_odom_cam if hasattr(fr, "T_odom_cam") else fr.T_odom_sensor
+        T = T if pose_edit is None else pose_edit(i, T)
+        msgs = [(S.TOPIC_ODOMETRY, S.pose_to_msg(T, ns, "odom"))]
+        if fr.ground_truth is not None:
+            axis = "z" if hasattr(fr, "T_odom_cam") else "x"
+            msgs.append((S.TOPIC_GROUND_TRUTH, PoseInFrame(timestamp=S.to_stamp(ns), frame_id="floorplan",
+                                                           pose=S.planar_pose_to_pose(fr.ground_truth, axis))))
+        if hasattr(fr, "ranges"):
+            msgs.append((S.TOPIC_SCAN, S.scan_to_msg(fr.ranges, fr.angle_min, fr.angle_increment, ns)))
+        else:
+            h, w = fr.depth.shape
+            calib = S.calibration_to_msg(fr.K, w, h, ns)
+            if distortion is not None:
+                del calib.D[:]
+                calib.D.extend(float(v) for v in distortion)
+                calib.distortion_model = model
+            msgs.append((S.TOPIC_CALIBRATION, calib))
+            d = np.nan_to_num(fr.depth, nan=0.0) * depth_scale
+            if depth_encoding == "32FC1":
+                msgs.append((S.TOPIC_DEPTH, S.depth_to_msg(d, ns)))
+            elif depth_encoding == "16UC1":
+                data = np.round(d).astype("<u2").tobytes()
+                msgs.append((S.TOPIC_DEPTH, RawImage(timestamp=S.to_stamp(ns), frame_id="camera", width=w, height=h,
+                                                     encoding="16UC1", step=2 * w, data=data)))
+            else:  # float32 bytes declared 16UC1 (rows as the floats need them)
+                msgs.append((S.TOPIC_DEPTH, RawImage(timestamp=S.to_stamp(ns), frame_id="camera", width=w, height=h,
+                                                     encoding="16UC1", step=4 * w, data=d.astype("<f4").tobytes())))
+            if labels and fr.labels is not None:
+                msgs.append((S.TOPIC_LABELS, S.labels_to_msg(fr.labels, ns)))
+        out += [(topic, ns + 5_000_000, m) for topic, m in msgs]
+    return out
+
+
+def ordered(msgs, order: str, rng: np.random.Generator | None = None) -> list:
+    """The messages as a file holds them: 'time' (as recorded), 'topic' (all of one topic,
+    then the next), 'reversed-topic' (topics in reverse order of first appearance),
+    'shuffled' (any order)."""
+    if order == "time":
+        return list(msgs)
+    if order in ("topic", "reversed-topic"):
+        topics = list(dict.fromkeys(t for t, _, _ in msgs))
+        topics = topics[::-1] if order == "reversed-topic" else topics
+        return [m for t in topics for m in msgs if m[0] == t]
+    if order == "shuffled":
+        rng = rng or np.random.default_rng(0)
+        return [msgs[i] for i in rng.permutation(len(msgs))]
+    raise ValueError(order)
+
+
+def write_messages(path, msgs, chunk_size: int = 4000, compression: str = "zstd", metadata: dict | None = None,
+                   log_time=None) -> None:
+    """An MCAP file of (topic, log time, message) in the given order; log_time(i, t)
+    replaces message i's log time."""
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=chunk_size, compression=CompressionType[compression.upper()])
+        w.start()
+        for name, data in (metadata or {}).items():
+            w.add_metadata(name, data)
+        ids = {}
+        for i, (topic, t, m) in enumerate(msgs):
+            if topic not in ids:
+                cls = CLASSES[topic]
+                sid = w.register_schema(cls.DESCRIPTOR.full_name, "protobuf", build_file_descriptor_set(cls).SerializeToString())
+                ids[topic] = w.register_channel(topic, "protobuf", sid)
+            t = t if log_time is None else log_time(i, t)
+            w.add_message(ids[topic], log_time=t, data=m.SerializeToString(), publish_time=t)
+        w.finish()
+
+
+def with_timestamps(frames, t0: float = 0.5, dt: float = 0.1):
+    return [dataclasses.replace(f, timestamp=t0 + dt * i) for i, f in enumerate(frames)]
