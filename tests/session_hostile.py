@@ -102,3 +102,27 @@ def write_messages(path, msgs, chunk_size: int = 4000, compression: str = "zstd"
 
 def with_timestamps(frames, t0: float = 0.5, dt: float = 0.1):
     return [dataclasses.replace(f, timestamp=t0 + dt * i) for i, f in enumerate(frames)]
+
+
+def rewrite(src, dst, order: str, rng: np.random.Generator | None = None, chunk_size: int = 4000) -> None:
+    """Any MCAP file (a session, a ROS 2 bag) with its messages rewritten in another order
+    (see `ordered`; topics are the channels' topics), schemas and channels as they were."""
+    from mcap.reader import make_reader
+
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        items = [(ch.topic, m.log_time, (ch, m)) for _, ch, m in reader.iter_messages(log_time_order=False)]
+        metadata = list(reader.iter_metadata())
+        profile = reader.get_header().profile
+    with open(dst, "wb") as f:
+        w = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        w.start(profile=profile)
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
+                       for cid, c in summary.channels.items()}
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
+        for _, _, (ch, m) in ordered(items, order, rng):
+            w.add_message(channel_ids[ch.id], log_time=m.log_time, data=m.data, publish_time=m.publish_time, sequence=m.sequence)
+        w.finish()

@@ -129,3 +129,87 @@ def test_salvage_reads_the_chunks_after_a_damaged_first_one(tmp_path, how):
     _same_frames(got, [f for f in write_fake_session(tmp_path / "again.mcap", frames)][3:])
     assert len(session.problems) == 1 and session.problems[0].startswith("chunk skipped: damaged chunk at byte")
     assert session.settings is not None and session.info["source"] == "test"
+
+
+# --- depth units -------------------------------------------------------------------------------
+def test_float_depth_in_millimetres_is_converted_with_one_note(tmp_path):
+    """Issue 44: float32 millimetres gave every frame 'initializing', exit 0, no warning."""
+    frames = camera_frames(6, seed=3, shape=(12, 16))
+    write_messages(tmp_path / "mm.mcap", frame_messages(frames, depth_scale=1000.0))
+    session = read_session(tmp_path / "mm.mcap")
+    got = list(session.records())
+    assert len(got) == 6
+    for rec, fr in zip(got, frames):
+        np.testing.assert_allclose(rec.frame.depth, np.nan_to_num(fr.depth), rtol=1e-6)
+    assert len(session.problems) == 1 and "millimetres" in session.problems[0] and "converted" in session.problems[0]
+
+
+def test_depth_neither_metres_nor_millimetres_drops_frames_with_the_reason(tmp_path):
+    frames = camera_frames(3, seed=3, shape=(12, 16))
+    write_messages(tmp_path / "km.mcap", frame_messages(frames, depth_scale=1e6))  # 300 m .. 8 km medians
+    session = read_session(tmp_path / "km.mcap")
+    assert list(session.records()) == []
+    assert all("implausible for an indoor camera" in p for p in session.problems) and len(session.problems) == 3
+
+
+def test_16uc1_declared_over_float_data_is_one_error_line(tmp_path):
+    frames = camera_frames(3, seed=3, shape=(12, 16))
+    write_messages(tmp_path / "mislabelled.mcap", frame_messages(frames, depth_scale=1000.0, depth_encoding="16UC1-over-float"))
+    with pytest.raises(SessionLogError, match=r"mislabelled\.mcap: .*declared 16UC1 but holds 4 bytes per pixel") as err:
+        list(read_session(tmp_path / "mislabelled.mcap").records())
+    assert "\n" not in str(err.value)
+
+
+def test_camera_frames_refuse_float_millimetres_said_to_be_metres():
+    from zfloc_stream.errors import FrameError
+    from zfloc_stream.frames import CameraFrame
+
+    fr = camera_frames(1, seed=1, shape=(12, 16))[0]
+    with pytest.raises(FrameError, match=r"median reading is .* implausible .*depth_unit='mm'"):
+        CameraFrame(fr.depth * 1000, fr.labels, fr.K, fr.T_odom_cam, 0.0)
+    mm = CameraFrame(fr.depth * 1000, fr.labels, fr.K, fr.T_odom_cam, 0.0, depth_unit="mm")
+    np.testing.assert_allclose(mm.depth, fr.depth, rtol=1e-6)
+
+
+# --- lens distortion ---------------------------------------------------------------------------
+@pytest.mark.parametrize("model,D", [("plumb_bob", (-0.28, 0.07, 0.001, -0.0005, 0.0)),
+                                     ("rational_polynomial", (0.3, -0.1, 0.001, 0.002, 0.01, 0.6, -0.05, 0.02)),
+                                     ("equidistant", (0.05, -0.01, 0.002, -0.0005))])
+def test_undistortion_matches_opencv(model, D):
+    import cv2
+
+    from zfloc_stream import lens
+
+    h, w = 48, 64
+    K = np.array([[40.0, 0, 31.5], [0, 41.0, 24.2], [0, 0, 1]])
+    src, inside = lens._map(K.tobytes(), model, D, (h, w))
+    if model == "equidistant":
+        mx, my = cv2.fisheye.initUndistortRectifyMap(K, np.array(D), np.eye(3), K, (w, h), cv2.CV_32FC1)
+    else:
+        mx, my = cv2.initUndistortRectifyMap(K, np.array(D), None, K, (w, h), cv2.CV_32FC1)
+    ref_in = (np.rint(mx) >= 0) & (np.rint(mx) < w) & (np.rint(my) >= 0) & (np.rint(my) < h)
+    ref = np.rint(my).astype(int) * w + np.rint(mx).astype(int)
+    agree = (inside == ref_in) & (~inside | (src == ref))
+    assert agree.mean() > 0.99  # float32 maps round a few half-pixels the other way
+    assert inside.mean() > 0.8 and (src != np.arange(h * w).reshape(h, w)).mean() > 0.3  # pixels moved
+
+
+def test_distorted_sessions_are_undistorted_and_unknown_models_noted(tmp_path):
+    from zfloc_stream import lens
+
+    frames = camera_frames(4, seed=3, shape=(24, 32))
+    D = (-0.25, 0.05, 0.0, 0.0, 0.0)
+    write_messages(tmp_path / "lens.mcap", frame_messages(frames, distortion=D))
+    got = list(read_session(tmp_path / "lens.mcap").records())
+    for rec, fr in zip(got, frames, strict=True):
+        d, lab = lens.undistort([np.nan_to_num(fr.depth), fr.labels], fr.K, "plumb_bob", D)
+        assert np.array_equal(np.nan_to_num(rec.frame.depth), d) and np.array_equal(rec.frame.labels, lab)
+        assert not np.array_equal(d, np.nan_to_num(fr.depth))
+    write_messages(tmp_path / "odd.mcap", frame_messages(frames, distortion=(0.1, 0.2), model="mei"))
+    session = read_session(tmp_path / "odd.mcap")
+    got = list(session.records())
+    assert np.array_equal(np.nan_to_num(got[0].frame.depth), np.nan_to_num(frames[0].depth))
+    assert len(session.problems) == 1 and "'mei' is not supported" in session.problems[0] and "ignored" in session.problems[0]
+    write_messages(tmp_path / "nan.mcap", frame_messages(frames, distortion=(np.nan, 0.0)))
+    with pytest.raises(SessionLogError, match="calibration D .* NaN"):
+        list(read_session(tmp_path / "nan.mcap").records())

@@ -62,7 +62,9 @@ class CameraFrame:
     rgb: optional HxWx3 uint8 colour image (RGB order) of the same pixel grid.
     depth_unit: "m" (default) or "mm": what the depth numbers count. Integer depth (a
     16-bit depth camera's millimetres) must say "mm" (it is converted to float32 metres);
-    integer depth said to be metres, boolean and complex depth are refused.
+    integer depth said to be metres, boolean and complex depth are refused, and so is
+    depth whose median reading is above MAX_MEDIAN_DEPTH_M (float millimetres said to be
+    metres: every wall would be kilometres away).
     """
 
     depth: np.ndarray | None
@@ -93,6 +95,9 @@ class CameraFrame:
             raise FrameError("depth contains negative values")
         if not valid.any():
             raise FrameError("depth has no valid reading (all zero or NaN)")
+        if np.count_nonzero(d[valid] > MAX_MEDIAN_DEPTH_M) * 2 > np.count_nonzero(valid):
+            raise FrameError(f"depth's median reading is {median_depth(d):.4g} m, implausible for an indoor camera "
+                             f"(above {MAX_MEDIAN_DEPTH_M:g} m): millimetres? declare them (depth_unit='mm')")
         object.__setattr__(self, "depth", d)
         if rgb is not None and rgb.shape[:2] != d.shape:
             raise FrameError(f"rgb image is {rgb.shape[1]}x{rgb.shape[0]} but depth is {d.shape[1]}x{d.shape[0]}")
@@ -125,6 +130,15 @@ class CameraFrame:
 
 
 DEPTH_UNITS = {"m": 1.0, "mm": 1e-3}
+# An indoor depth camera reads at most a few tens of metres (structured light ~10 m, stereo
+# ~20-40 m): a median reading above this is another unit (millimetres), never metres.
+MAX_MEDIAN_DEPTH_M = 50.0
+
+
+def median_depth(d: np.ndarray) -> float:
+    """Median of the valid (finite, non-zero) readings; 0 when there is none."""
+    v = d[np.isfinite(d) & (d != 0)]
+    return float(np.median(v)) if v.size else 0.0
 
 
 def _depth_in_metres(depth, unit: str) -> np.ndarray:

@@ -301,7 +301,10 @@ class Session:
                 labels = parts.get(S.TOPIC_LABELS, (None,))[0]
                 depth = parts.get(S.TOPIC_DEPTH, (None,))[0]
                 image = parts.get(S.TOPIC_IMAGE, (None,))[0]
-                frame = camera_frame_from_msgs(depth, labels, calib, odom, gt, axis, S.ns_to_seconds(stamp), image)
+                notes: list[str] = []
+                frame = camera_frame_from_msgs(depth, labels, calib, odom, gt, axis, S.ns_to_seconds(stamp), image, notes)
+                for note in notes:
+                    self.note_once(note, where)
             else:
                 scan, meta = parts[S.TOPIC_SCAN]
                 cfg = (self.settings or Settings()).logging
@@ -339,6 +342,13 @@ class Session:
         return self.shared["index"]
 
     # --- faults ---------------------------------------------------------------
+    def note_once(self, note: str, where: str) -> None:
+        """A change made to what the file holds (millimetres converted, distortion
+        ignored), noted once per read at the first frame it concerns."""
+        key = note.split(" (")[0]
+        if not any(p.startswith(key) for p in self.problems):
+            self.problems.append(f"{note} (first at {where})")
+
     def fail(self, what: str) -> None:
         """A fault in the file: raise, or in salvage mode note it and go on."""
         if not self.salvage:

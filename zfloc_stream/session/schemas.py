@@ -166,8 +166,16 @@ def calibration_to_msg(K: np.ndarray, width: int, height: int, ns: int, frame_id
     )
 
 
+def distortion_from_msg(msg: CameraCalibration) -> tuple[str, tuple[float, ...]]:
+    """(distortion model, D); refused where a coefficient is NaN or inf."""
+    D = tuple(float(v) for v in msg.D)
+    if not all(math.isfinite(v) for v in D):
+        raise SessionLogError(f"calibration D {list(D)} contains NaN or inf")
+    return str(msg.distortion_model), D
+
+
 def calibration_from_msg(msg: CameraCalibration) -> tuple[np.ndarray, int, int]:
-    """(K 3x3, width, height). Distortion is ignored: depth images are taken as rectified."""
+    """(K 3x3, width, height). Distortion: distortion_from_msg (removed by assemble.py)."""
     if len(msg.K) != 9:
         raise SessionLogError(f"calibration K has {len(msg.K)} values, expected 9")
     K = np.array(msg.K, dtype=float).reshape(3, 3)
