@@ -30,7 +30,7 @@ def frame_messages(frames, depth_scale: float = 1.0, depth_encoding: str = "32FC
     declared 16UC1). distortion: the calibration's D. pose_edit(i, T) -> T edits odometry."""
     out = []
     for i, fr in enumerate(frames):
-        ns = S.seconds_to_ns(fr.timestamp)
+        ns = int(round(fr.timestamp * 1e9))  # (not seconds_to_ns: hostile times are written too)
         T = fr.T_odom_cam if hasattr(fr, "T_odom_cam") else fr.T_odom_sensor
         T = T if pose_edit is None else pose_edit(i, T)
         msgs = [(S.TOPIC_ODOMETRY, S.pose_to_msg(T, ns, "odom"))]

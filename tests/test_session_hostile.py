@@ -213,3 +213,75 @@ def test_distorted_sessions_are_undistorted_and_unknown_models_noted(tmp_path):
     write_messages(tmp_path / "nan.mcap", frame_messages(frames, distortion=(np.nan, 0.0)))
     with pytest.raises(SessionLogError, match="calibration D .* NaN"):
         list(read_session(tmp_path / "nan.mcap").records())
+
+
+# --- huge values ------------------------------------------------------------------------------
+def _huge_x(i, T):
+    if i < 3:
+        return T
+    T = T.copy()
+    T[0, 3] = 1e300
+    return T
+
+
+def test_huge_odometry_is_a_frame_error_at_the_api_and_a_dropped_frame_in_a_session(tmp_path):
+    """Issue 44: odometry x = 1e300 raised OverflowError in the scrolling grid."""
+    from zfloc_stream.errors import FrameError
+    from zfloc_stream.frames import LaserFrame
+    from zfloc_stream.frontend.scrolling_grid import ScrollingGrid
+
+    fr = laser_frames(1, beams=20)[0]
+    with pytest.raises(FrameError, match=r"T_odom_sensor position .* beyond 1e\+09 m"):
+        LaserFrame(fr.ranges, fr.angle_min, fr.angle_increment, fr.range_min, fr.range_max, _huge_x(5, fr.T_odom_sensor), 0.0)
+    grid = ScrollingGrid(16, 0.05)
+    with pytest.raises(FrameError, match="beyond the map's cells"):
+        grid.centre_on(np.array([1e300, 0.0]), 2)
+    assert grid.ix0 is None  # refused before any change
+    write_messages(tmp_path / "huge.mcap", frame_messages(laser_frames(6, beams=20), pose_edit=_huge_x))
+    session = read_session(tmp_path / "huge.mcap")
+    assert len(list(session.records())) == 3
+    assert len(session.problems) == 3 and all("beyond 1e+09 m" in p for p in session.problems)
+
+
+def test_times_beyond_2_63_ns_are_one_error_line(tmp_path):
+    from session_hostile import with_timestamps
+
+    write_messages(tmp_path / "late.mcap", frame_messages(with_timestamps(laser_frames(4, beams=20), t0=9.3e9)))
+    session = read_session(tmp_path / "late.mcap")
+    with pytest.raises(SessionLogError, match=r"late\.mcap: /odometry message at log time \d+: its time \d+ ns is beyond 2\^63 ns"):
+        list(session.records())
+    with pytest.raises(SessionLogError, match="beyond 2\\^63 ns"):
+        session.frame_index()
+    # log times beyond 2^63 (MCAP allows up to 2^64) with sane header stamps read as usual
+    write_messages(tmp_path / "log.mcap", frame_messages(laser_frames(4, beams=20)), log_time=lambda i, t: t + (1 << 63))
+    assert len(list(read_session(tmp_path / "log.mcap").records())) == 4
+    from zfloc_stream.session import schemas as S
+
+    with pytest.raises(SessionLogError, match="before 2\\^63 ns"):
+        S.seconds_to_ns(1e300)
+
+
+@pytest.mark.slow
+def test_cli_on_huge_odometry_and_late_times_warns_or_fails_in_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    from session_hostile import with_timestamps
+
+    from zfloc_stream.sim import build_scene
+
+    plan = build_scene("rooms", seed=0).floorplan.write_ros(tmp_path / "plan", "map")
+    write_messages(tmp_path / "huge.mcap", frame_messages(laser_frames(8, beams=90), pose_edit=_huge_x))
+    write_messages(tmp_path / "late.mcap", frame_messages(with_timestamps(laser_frames(4, beams=20), t0=9.3e9)))
+
+    def run(name):
+        return subprocess.run([sys.executable, "-m", "zfloc_stream.tools.cli", "run", "--floorplan", str(plan), "--input",
+                               str(tmp_path / name), "--out", str(tmp_path / name.replace(".", "-")), "--no-progress"],
+                              capture_output=True, text=True, timeout=300)
+
+    proc = run("huge.mcap")
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "beyond 1e+09 m" in proc.stderr and "5 frame(s) dropped" in proc.stderr
+    proc = run("late.mcap")
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert proc.returncode == 2 and len(lines) == 1 and "error: " in lines[0] and "2^63" in lines[0], proc.stderr

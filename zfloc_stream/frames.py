@@ -13,6 +13,10 @@ import numpy as np
 
 from .errors import FrameError
 
+# A pose this far from the odometry origin (a million km) is no robot's: the rolling map's
+# integer cells (and float precision) end long before 1e300 (issue 44: an OverflowError)
+MAX_POSITION_M = 1e9
+
 # Label codes (DESIGN.md, /camera/labels mono8)
 UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
 
@@ -31,6 +35,9 @@ def _check_pose(T, name: str) -> np.ndarray:
         raise FrameError(f"{name} must be a 4x4 matrix, got shape {T.shape}")
     if not np.isfinite(T).all():
         raise FrameError(f"{name} contains NaN or inf")
+    if np.abs(T[:3, 3]).max() > MAX_POSITION_M:
+        raise FrameError(f"{name} position {T[:3, 3].tolist()} is beyond {MAX_POSITION_M:g} m of the odometry origin "
+                         "(odometry in another unit, or garbage?)")
     R = T[:3, :3]
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
         raise FrameError(f"{name} rotation is not orthonormal (R^T R != I or det < 0)")

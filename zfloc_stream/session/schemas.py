@@ -82,9 +82,12 @@ def crc32_hex(data: bytes) -> str:
 
 
 # --- time -----------------------------------------------------------------------------------
+MAX_NS = 1 << 63  # stamps are int64 ns (numpy arrays, the year 2262); MCAP's own log times go to 2^64
+
+
 def seconds_to_ns(t: float) -> int:
-    if not math.isfinite(t) or t < 0:
-        raise SessionLogError(f"timestamp {t} cannot be logged: MCAP times are finite and non-negative")
+    if not math.isfinite(t) or t < 0 or t * 1e9 >= MAX_NS:
+        raise SessionLogError(f"timestamp {t} cannot be logged: session times are finite, non-negative and before 2^63 ns (the year 2262)")
     return int(round(t * 1e9))
 
 
