@@ -48,11 +48,13 @@ def frame_messages(frames, depth_scale: float = 1.0, depth_encoding: str = "32FC
                 calib.D.extend(float(v) for v in distortion)
                 calib.distortion_model = model
             msgs.append((S.TOPIC_CALIBRATION, calib))
-            d = np.nan_to_num(fr.depth, nan=0.0) * depth_scale
+            with np.errstate(all="ignore"):  # hostile scales overflow on purpose
+                d = np.nan_to_num(fr.depth, nan=0.0) * depth_scale
+                u16 = np.round(d).astype("<u2")
             if depth_encoding == "32FC1":
                 msgs.append((S.TOPIC_DEPTH, S.depth_to_msg(d, ns)))
             elif depth_encoding == "16UC1":
-                data = np.round(d).astype("<u2").tobytes()
+                data = u16.tobytes()
                 msgs.append((S.TOPIC_DEPTH, RawImage(timestamp=S.to_stamp(ns), frame_id="camera", width=w, height=h,
                                                      encoding="16UC1", step=2 * w, data=data)))
             else:  # float32 bytes declared 16UC1 (rows as the floats need them)
@@ -126,3 +128,67 @@ def rewrite(src, dst, order: str, rng: np.random.Generator | None = None, chunk_
         for _, _, (ch, m) in ordered(items, order, rng):
             w.add_message(channel_ids[ch.id], log_time=m.log_time, data=m.data, publish_time=m.publish_time, sequence=m.sequence)
         w.finish()
+
+
+def hostile_session(rng: np.random.Generator, path, small: bool = True) -> str:
+    """One seeded session of the issue-44 families, written to path; returns what it is.
+    Families: message order, depth units and encodings, lens distortion, huge or
+    non-finite poses, times near and beyond 2^63 ns, a damaged chunk; mixed at random."""
+    from session_helpers import camera_frames, laser_frames
+
+    n = int(rng.integers(3, 12))
+    laser = rng.random() < 0.3
+    seed = int(rng.integers(1 << 30))
+    frames = laser_frames(n, seed=seed, beams=int(rng.integers(5, 40))) if laser else \
+        camera_frames(n, seed=seed, shape=(int(rng.integers(4, 16)), int(rng.integers(8, 24))))
+    what = []
+    kw = {}
+    if not laser:
+        scale = float(rng.choice([1.0, 1.0, 10.0, 100.0, 1000.0, 1e6, -1.0, 1e40]))
+        kw["depth_scale"] = scale
+        kw["depth_encoding"] = str(rng.choice(["32FC1", "32FC1", "16UC1", "16UC1-over-float"]))
+        if rng.random() < 0.4:
+            k = int(rng.choice([2, 4, 5, 8, 14]))
+            kw["distortion"] = rng.normal(scale=float(rng.choice([0.05, 1.0, 1e6])), size=k)
+            kw["model"] = str(rng.choice(["plumb_bob", "rational_polynomial", "equidistant", "kannala_brandt", "mei", ""]))
+        what.append(f"depth x{scale:g} as {kw['depth_encoding']}, D={kw.get('model', '-')}")
+    if rng.random() < 0.3:
+        bad = float(rng.choice([1e300, -1e300, 1e20, 1e9, 2e9, np.inf, np.nan]))
+        at = int(rng.integers(n))
+        axis = int(rng.integers(3))
+
+        def pose_edit(i, T, at=at, bad=bad, axis=axis):
+            if i < at:
+                return T
+            T = T.copy()
+            T[axis, 3] = bad
+            return T
+
+        kw["pose_edit"] = pose_edit
+        what.append(f"pose[{axis}]={bad:g} from frame {at}")
+    t0 = float(rng.choice([0.5, 0.5, 9.2e9, 9.3e9, 1.8e10]))
+    if t0 != 0.5:
+        frames = with_timestamps(frames, t0=t0, dt=float(rng.choice([0.1, 1e-9, 0.0])))
+        what.append(f"t0={t0:g}")
+    msgs = frame_messages(frames, **kw)
+    order = str(rng.choice(ORDERS))
+    msgs = ordered(msgs, order, rng)
+    log_time = None
+    if rng.random() < 0.15:
+        log_time = lambda i, t: min(t + (1 << 63), (1 << 64) - 1)  # noqa: E731
+        what.append("log times beyond 2^63")
+    write_messages(path, msgs, chunk_size=int(rng.choice([500, 4000, 100_000])), log_time=lambda i, t: min(
+        (t if log_time is None else log_time(i, t)), (1 << 64) - 1))
+    what.append(order)
+    if rng.random() < 0.2:  # damage one chunk (the first, or any)
+        from mcap.reader import make_reader
+
+        with open(path, "rb") as f:
+            chunks = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+        c = chunks[0] if rng.random() < 0.5 else chunks[int(rng.integers(len(chunks)))]
+        data = bytearray(open(path, "rb").read())
+        pos = c.chunk_start_offset + int(rng.integers(c.chunk_length))
+        data[pos] ^= int(rng.integers(1, 256))
+        open(path, "wb").write(bytes(data))
+        what.append(f"byte {pos} of a chunk flipped")
+    return "; ".join(what)

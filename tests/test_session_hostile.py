@@ -285,3 +285,69 @@ def test_cli_on_huge_odometry_and_late_times_warns_or_fails_in_one_line(tmp_path
     proc = run("late.mcap")
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert proc.returncode == 2 and len(lines) == 1 and "error: " in lines[0] and "2^63" in lines[0], proc.stderr
+
+
+# --- ROS 2 bags: the same families ---------------------------------------------------------------
+def _bag(tmp_path, name="bag.mcap", n=30, **kw):
+    from ros2_bag import mount, write_sensor_bag
+
+    frames = camera_frames(n, seed=3, shape=(24, 32), labels=False)
+    path = tmp_path / name
+    write_sensor_bag(path, frames, mount(0.1, 0.0, 1.0, optical=True), kind="depth", depth_mm=False, **kw)
+    return path, frames
+
+
+def _bag_frames(path, settings=None):
+    from zfloc_stream.datasets.ros2 import bag_sequence
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        seq = bag_sequence(path, settings or Settings())
+        frames = list(seq.frames())
+    return frames, [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize("order", ["topic", "shuffled"])
+def test_bags_out_of_log_time_order_read_the_same_frames(tmp_path, order):
+    from session_hostile import rewrite
+
+    path, _ = _bag(tmp_path)
+    want, _ = _bag_frames(path)
+    rewrite(path, tmp_path / f"{order}.mcap", order, np.random.default_rng(4))
+    got, caught = _bag_frames(tmp_path / f"{order}.mcap")
+    assert caught == [] and len(got) == len(want) == 30
+    for a, b in zip(got, want):
+        assert a.timestamp == b.timestamp and np.array_equal(a.depth, b.depth) and np.array_equal(a.T_odom_cam, b.T_odom_cam)
+
+
+def test_a_shuffled_bag_beyond_the_reorder_limit_is_refused(tmp_path, monkeypatch):
+    from session_hostile import rewrite
+
+    import zfloc_stream.datasets.ros2 as ros2
+    from zfloc_stream.errors import InputError
+
+    path, _ = _bag(tmp_path, n=40)
+    rewrite(path, tmp_path / "s.mcap", "shuffled", np.random.default_rng(4), chunk_size=2000)
+    monkeypatch.setattr(ros2, "MIB", 1024)  # a 1 KiB 'MiB': the small bag stands in for a large one
+    with pytest.raises(InputError, match=r"s\.mcap: .*out of log-time order.*logging\.reorder_max_mb"):
+        ros2.bag_sequence(tmp_path / "s.mcap", load_settings(overrides=["logging.reorder_max_mb=1"]))
+    assert len(_bag_frames(tmp_path / "s.mcap")[0]) == 40  # within the default limit
+
+
+def test_bag_depth_in_float_millimetres_is_converted_with_one_warning(tmp_path):
+    path, frames = _bag(tmp_path, depth_scale=1000.0)
+    got, caught = _bag_frames(path)
+    assert len(got) == 30
+    np.testing.assert_allclose(got[4].depth, np.nan_to_num(frames[4].depth), rtol=1e-6)
+    assert len([c for c in caught if "millimetres" in c and "converted" in c]) == 1
+
+
+def test_bag_camera_info_distortion_is_removed(tmp_path):
+    from zfloc_stream import lens
+
+    D = (-0.2, 0.04, 0.0, 0.0, 0.0)
+    path, frames = _bag(tmp_path, distortion=D)
+    got, caught = _bag_frames(path)
+    assert caught == []
+    want = lens.undistort([np.nan_to_num(frames[2].depth).astype(np.float32)], frames[2].K, "plumb_bob", D)[0]
+    assert np.array_equal(got[2].depth, want)

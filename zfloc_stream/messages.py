@@ -49,7 +49,7 @@ def depth_from_msg(msg) -> np.ndarray:
 # kilometres away and every frame stays 'initializing'. An indoor depth camera's median
 # reading is never above MAX_MEDIAN_DEPTH_M (frames.py); millimetres put it at 250-50,000.
 MM_MEDIAN_RANGE = (250.0, 50_000.0)
-MM_NOTE = "/camera/depth holds millimetres"  # the start of the note, one per read
+MM_NOTE = "depth holds millimetres"  # the start of the note: a reader warns once per read
 
 
 def depth_in_metres(msg) -> tuple[np.ndarray, str | None]:

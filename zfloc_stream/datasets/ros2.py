@@ -333,8 +333,8 @@ class Ros2Bag:
                 else:
                     note = note or (f"{self.topics['camera_info']} distortion model '{model}' is not supported "
                                     f"({', '.join(lens.MODELS)}): its coefficients {list(D)} ignored, depth used as it is")
-            if note is not None and note not in self.notes:
-                self.notes.add(note)
+            if note is not None and note.split(" (")[0] not in self.notes:
+                self.notes.add(note.split(" (")[0])
                 warnings.warn(f"{self.path}: {self.topics[self.kind]}: {note} (first at t={t:.6f})", stacklevel=3)
             return CameraFrame(depth, None, K, T, t)
         except (SessionLogError, FrameError) as err:  # one unusable frame: skip it, say why
