@@ -46,6 +46,10 @@ def summary_channels(session) -> dict[int, Channel | None]:
 
 def chunk_messages(path, f, chunk) -> list[Message]:
     """The messages of one chunk (found by its index), in their order in the chunk."""
+    zeros = zeroed_run(f, chunk.chunk_start_offset, 9 + chunk.chunk_length)
+    if zeros:
+        raise SessionLogError(f"{path}: damaged file: zeroed bytes at byte {chunk.chunk_start_offset} (a region overwritten "
+                              f"with zeros, {zeros} bytes where the index puts a chunk); read around it with --salvage")
     try:
         f.seek(chunk.chunk_start_offset)
         record = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=Path(path).stat().st_size).records)
@@ -55,6 +59,17 @@ def chunk_messages(path, f, chunk) -> list[Message]:
     except Exception as err:  # noqa: BLE001 - any parser fault on damaged bytes
         what = f"{type(err).__name__}: {err}".replace("\n", " ")
         raise SessionLogError(f"{path}: damaged chunk at byte {chunk.chunk_start_offset} ({what}); try --salvage") from None
+
+
+def zeroed_run(f, offset: int, length: int) -> int:
+    """Zero bytes from offset on (within length) where the record's opcode is 0 (reserved:
+    bytes overwritten with zeros); 0 where it is not."""
+    f.seek(offset)
+    if f.read(1) != b"\0":  # (one byte read: a sound chunk costs nothing more)
+        return 0
+    f.seek(offset)
+    data = f.read(length)
+    return len(data) - len(data.lstrip(b"\0"))
 
 
 def held_at_once(chunks) -> int:
@@ -103,7 +118,11 @@ def ordered_messages(session, f, counted: list[int] | None = None) -> Iterator[t
         except SessionLogError as err:
             if not session.salvage:
                 raise
-            session.problems.append(f"chunk skipped: {str(err).removeprefix(f'{session.path}: ').removesuffix('; try --salvage')}")
+            zeros = zeroed_run(f, chunks[item].chunk_start_offset, 9 + chunks[item].chunk_length)
+            start = chunks[item].chunk_start_offset
+            session.problems.append(f"damaged file: zeroed bytes at bytes {start}-{start + zeros - 1} skipped (a region overwritten "
+                                    "with zeros)" if zeros else
+                                    f"chunk skipped: {str(err).removeprefix(f'{session.path}: ').removesuffix('; try --salvage')}")
             continue
         if counted is not None:
             counted[0] += len(inner)
