@@ -64,11 +64,13 @@ def chunk_messages(path, f, chunk) -> list[Message]:
 def zeroed_run(f, offset: int, length: int) -> int:
     """Zero bytes from offset on (within length) where the record's opcode is 0 (reserved:
     bytes overwritten with zeros); 0 where it is not."""
+    if not 0 <= offset < 1 << 62 or length < 0:
+        return 0  # a damaged index: the read itself reports it
     f.seek(offset)
     if f.read(1) != b"\0":  # (one byte read: a sound chunk costs nothing more)
         return 0
     f.seek(offset)
-    data = f.read(length)
+    data = f.read(min(length, 1 << 30))
     return len(data) - len(data.lstrip(b"\0"))
 
 
