@@ -102,7 +102,7 @@ class CameraFrame:
             raise FrameError("depth contains negative values")
         if not valid.any():
             raise FrameError("depth has no valid reading (all zero or NaN)")
-        if np.count_nonzero(d[valid] > MAX_MEDIAN_DEPTH_M) * 2 > np.count_nonzero(valid):
+        if median_above(d, MAX_MEDIAN_DEPTH_M, valid):
             raise FrameError(f"depth's median reading is {median_depth(d):.4g} m, implausible for an indoor camera "
                              f"(above {MAX_MEDIAN_DEPTH_M:g} m): millimetres? declare them (depth_unit='mm')")
         object.__setattr__(self, "depth", d)
@@ -140,6 +140,13 @@ DEPTH_UNITS = {"m": 1.0, "mm": 1e-3}
 # An indoor depth camera reads at most a few tens of metres (structured light ~10 m, stereo
 # ~20-40 m): a median reading above this is another unit (millimetres), never metres.
 MAX_MEDIAN_DEPTH_M = 50.0
+
+
+def median_above(d: np.ndarray, limit: float, valid: np.ndarray | None = None) -> bool:
+    """Whether more than half the valid readings lie above limit (median > limit, without a sort)."""
+    valid = np.isfinite(d) & (d != 0) if valid is None else valid
+    with np.errstate(invalid="ignore"):
+        return 2 * np.count_nonzero(d > limit) > np.count_nonzero(valid)
 
 
 def median_depth(d: np.ndarray) -> float:

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from .errors import SessionLogError
-from .frames import MAX_MEDIAN_DEPTH_M, median_depth
+from .frames import MAX_MEDIAN_DEPTH_M, median_above, median_depth
 
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
 
@@ -59,8 +59,10 @@ def depth_in_metres(msg) -> tuple[np.ndarray, str | None]:
     d = depth_from_msg(msg)
     if msg.encoding != "32FC1":
         return d, None
+    if not median_above(d, MAX_MEDIAN_DEPTH_M):  # (a comparison: the median itself costs ms per frame)
+        return d, None
     median = median_depth(d)
-    if median > MAX_MEDIAN_DEPTH_M and MM_MEDIAN_RANGE[0] <= median <= MM_MEDIAN_RANGE[1]:
+    if MM_MEDIAN_RANGE[0] <= median <= MM_MEDIAN_RANGE[1]:
         note = (f"{MM_NOTE}, not metres (median reading {median:.0f} 'm', above the {MAX_MEDIAN_DEPTH_M:.0f} m "
                 "an indoor camera sees): converted to metres")
         return (d.astype(np.float64) * 1e-3).astype(np.float32), note

@@ -10,7 +10,9 @@ timestamp make a frame (odometry at its own rate and stamps is interpolated at t
 frame's timestamp instead: pose_interpolation.py); /camera/labels and /groundtruth/pose of that timestamp are added
 when present; the calibration is the latest one at or before it. A frame is complete once
 every input topic has moved past its timestamp, so only a few frames are ever buffered.
-Files from other tools on the same topics read the same way.
+Messages are handed to the grouping in log-time order where the file has a chunk index
+(ordering.py: another tool may write them grouped by topic or shuffled), else in file
+order. Files from other tools on the same topics read the same way.
 
 Every fault ends as a SessionLogError naming the file and what is wrong. With
 salvage=True a truncated or damaged file yields what its intact chunks hold, and the
@@ -117,7 +119,7 @@ class Session:
         summary: Summary | None = None,
     ):
         self.path = path
-        self.summary = summary  # schemas, channels, chunk indexes (None: salvage or no summary)
+        self.summary = summary  # schemas, channels, chunk indexes (None: no summary; salvage: where the file's end survived)
         self.shared: dict = {}  # frame index and channel decoders, shared with fresh() copies
         self.salvage = salvage
         self.metadata = metadata
