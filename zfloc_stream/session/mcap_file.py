@@ -139,7 +139,7 @@ def open_indexed(path: Path) -> tuple[dict, dict, Summary | None]:
     return metadata, attachments, summary
 
 
-def open_salvaged(path: Path, problems: list[str]) -> tuple[dict, dict, Summary | None]:
+def open_salvaged(path: Path) -> tuple[dict, dict, Summary | None]:
     """Metadata and attachments found by a scan of top-level records, and the summary
     where the file's end survived (its chunk index then reaches the chunks after a
     damaged one, and its channels those whose definitions the damage took)."""

@@ -376,7 +376,7 @@ def read_session(path: str | Path, salvage: bool = False, settings: Settings | N
     problems: list[str] = []
     summary = topics = None
     if salvage:
-        metadata, attachments, summary = open_salvaged(path, problems)
+        metadata, attachments, summary = open_salvaged(path)
     else:
         metadata, attachments, summary = open_indexed(path)
         if summary is not None:
