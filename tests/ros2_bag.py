@@ -116,11 +116,12 @@ class BagWriter:
 def write_sensor_bag(path, frames, T_base_sensor, kind: str = "scan", sensor_hz: float = 15.0, odom_hz: float = 50.0,
                      t0: float = 100.0, odom_offset: float = 0.007, swap_odometry: int | None = None,
                      odom_via_tf: bool = False, sensor_frame: str | None = None, depth_mm: bool = True,
-                     scan_topic: str = "/scan") -> list[int]:
+                     scan_topic: str = "/scan", depth_scale: float = 1.0, distortion=None) -> list[int]:
     """A bag of the frames (LaserFrame for kind='scan', CameraFrame for 'depth') at sensor_hz,
     odometry of base_link at odom_hz on its own stamps (offset from the sensor's), a
     /tf_static base_link -> sensor mount. swap_odometry=j writes odometry messages j and
-    j+1 in swapped order (out of order in the file). Returns the frame stamps (ns)."""
+    j+1 in swapped order (out of order in the file). depth_scale multiplies the 32FC1 depth
+    (1000: millimetres); distortion: CameraInfo's plumb_bob d. Returns the frame stamps (ns)."""
     sensor_frame = sensor_frame or ("laser" if kind == "scan" else "camera_depth_optical_frame")
     n = len(frames)
     frame_ns = np.array([int(round((t0 + k / sensor_hz) * 1e9)) for k in range(n)], dtype=np.int64)
@@ -136,7 +137,7 @@ def write_sensor_bag(path, frames, T_base_sensor, kind: str = "scan", sensor_hz:
         K = frames[0].K
         h, w = frames[0].depth.shape
         info = {"header": header(int(frame_ns[0]), sensor_frame), "height": h, "width": w, "distortion_model": "plumb_bob",
-                "d": [0.0] * 5, "k": K.ravel().tolist(), "r": np.eye(3).ravel().tolist(),
+                "d": [0.0] * 5 if distortion is None else [float(v) for v in distortion], "k": K.ravel().tolist(), "r": np.eye(3).ravel().tolist(),
                 "p": np.hstack([K, np.zeros((3, 1))]).ravel().tolist(), "binning_x": 0, "binning_y": 0,
                 "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
         bag.write("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo", info, int(frame_ns[0]) - 10**9)
@@ -166,7 +167,7 @@ def write_sensor_bag(path, frames, T_base_sensor, kind: str = "scan", sensor_hz:
             if depth_mm:
                 data, enc, item = np.round(d * 1000.0).astype("<u2").tobytes(), "16UC1", 2
             else:
-                data, enc, item = d.astype("<f4").tobytes(), "32FC1", 4
+                data, enc, item = (d * depth_scale).astype("<f4").tobytes(), "32FC1", 4
             h, w = d.shape
             msg = {"header": header(ns, sensor_frame), "height": h, "width": w, "encoding": enc, "is_bigendian": 0,
                    "step": w * item, "data": data}

@@ -99,3 +99,55 @@ def test_laser_session_flips(tmp_path):
             _read_everything(path, salvage=False, with_floorplan=False)
         except SessionLogError as err:
             assert str(path) in str(err)
+
+
+# --- issue 44 families: valid-but-odd and hostile sessions (tests/session_hostile.py) ----------
+def _read_hostile(path, salvage: bool) -> int:
+    session = read_session(path, salvage=salvage)
+    n = sum(1 for _ in session.records())
+    if not salvage:
+        index = session.frame_index()
+        assert index is None or len(index) == n, (len(index), n)
+    return n
+
+
+def _hostile_cases(n_cases: int, seed: int, tmp_path) -> dict:
+    import warnings
+
+    from session_hostile import hostile_session
+
+    rng = np.random.default_rng(seed)
+    path = tmp_path / "hostile.mcap"
+    outcomes = {"read": 0, "error": 0, "frames": 0}
+    for case in range(n_cases):
+        what = hostile_session(rng, path)
+        for salvage in (False, True):
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error", RuntimeWarning)  # no numpy overflow on the way either
+                    outcomes["frames"] += _read_hostile(path, salvage)
+                outcomes["read"] += 1
+            except SessionLogError as err:
+                msg = str(err)
+                assert str(path) in msg and "\n" not in msg.strip(), f"case {case} ({what}): {msg!r}"
+                outcomes["error"] += 1
+            except Exception as err:  # noqa: BLE001 - the point of the test
+                raise AssertionError(f"case {case} ({what}), salvage={salvage}: {type(err).__name__}: {err}") from err
+    return outcomes
+
+
+def test_hostile_session_families_read_or_fail_in_one_line(tmp_path):
+    """Fast subset (CI): 60 seeded sessions of the issue-44 families, read strictly and salvaged."""
+    outcomes = _hostile_cases(60, 4401, tmp_path)
+    assert outcomes["read"] > 30 and outcomes["error"] > 5 and outcomes["frames"] > 100, outcomes
+
+
+@pytest.mark.slow
+def test_hostile_session_families_1000(tmp_path):
+    """>= 1,000 inputs, 0 tracebacks; peak RSS printed (pytest -s)."""
+    import resource
+
+    outcomes = _hostile_cases(1000, 4402, tmp_path)
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"hostile sessions: {outcomes}, peak RSS {peak_mib:.0f} MiB")
+    assert outcomes["read"] > 500 and outcomes["error"] > 50, outcomes

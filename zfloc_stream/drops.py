@@ -40,7 +40,7 @@ class DropCounter:
         if m or "frame dropped" in problem:
             self.note(problem[m.end():] if m else problem, m.group(1) if m else "")
             return
-        if not any(word in problem for word in ("dropped", "skipped", "stopped", "damaged")):
+        if not any(word in problem for word in ("dropped", "skipped", "stopped", "damaged", "converted", "ignored")):
             return  # a note that loses nothing (repeated stamps kept in file order)
         cause = _LOG_TIME.sub("", problem)
         if cause not in self.other:

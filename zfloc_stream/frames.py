@@ -13,6 +13,10 @@ import numpy as np
 
 from .errors import FrameError
 
+# A pose this far from the odometry origin (a million km) is no robot's: the rolling map's
+# integer cells (and float precision) end long before 1e300 (issue 44: an OverflowError)
+MAX_POSITION_M = 1e9
+
 # Label codes (DESIGN.md, /camera/labels mono8)
 UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
 
@@ -31,6 +35,9 @@ def _check_pose(T, name: str) -> np.ndarray:
         raise FrameError(f"{name} must be a 4x4 matrix, got shape {T.shape}")
     if not np.isfinite(T).all():
         raise FrameError(f"{name} contains NaN or inf")
+    if np.abs(T[:3, 3]).max() > MAX_POSITION_M:
+        raise FrameError(f"{name} position {T[:3, 3].tolist()} is beyond {MAX_POSITION_M:g} m of the odometry origin "
+                         "(odometry in another unit, or garbage?)")
     R = T[:3, :3]
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
         raise FrameError(f"{name} rotation is not orthonormal (R^T R != I or det < 0)")
@@ -62,7 +69,9 @@ class CameraFrame:
     rgb: optional HxWx3 uint8 colour image (RGB order) of the same pixel grid.
     depth_unit: "m" (default) or "mm": what the depth numbers count. Integer depth (a
     16-bit depth camera's millimetres) must say "mm" (it is converted to float32 metres);
-    integer depth said to be metres, boolean and complex depth are refused.
+    integer depth said to be metres, boolean and complex depth are refused, and so is
+    depth whose median reading is above MAX_MEDIAN_DEPTH_M (float millimetres said to be
+    metres: every wall would be kilometres away).
     """
 
     depth: np.ndarray | None
@@ -93,6 +102,9 @@ class CameraFrame:
             raise FrameError("depth contains negative values")
         if not valid.any():
             raise FrameError("depth has no valid reading (all zero or NaN)")
+        if median_above(d, MAX_MEDIAN_DEPTH_M, valid):
+            raise FrameError(f"depth's median reading is {median_depth(d):.4g} m, implausible for an indoor camera "
+                             f"(above {MAX_MEDIAN_DEPTH_M:g} m): millimetres? declare them (depth_unit='mm')")
         object.__setattr__(self, "depth", d)
         if rgb is not None and rgb.shape[:2] != d.shape:
             raise FrameError(f"rgb image is {rgb.shape[1]}x{rgb.shape[0]} but depth is {d.shape[1]}x{d.shape[0]}")
@@ -125,6 +137,22 @@ class CameraFrame:
 
 
 DEPTH_UNITS = {"m": 1.0, "mm": 1e-3}
+# An indoor depth camera reads at most a few tens of metres (structured light ~10 m, stereo
+# ~20-40 m): a median reading above this is another unit (millimetres), never metres.
+MAX_MEDIAN_DEPTH_M = 50.0
+
+
+def median_above(d: np.ndarray, limit: float, valid: np.ndarray | None = None) -> bool:
+    """Whether more than half the valid readings lie above limit (median > limit, without a sort)."""
+    valid = np.isfinite(d) & (d != 0) if valid is None else valid
+    with np.errstate(invalid="ignore"):
+        return 2 * np.count_nonzero(d > limit) > np.count_nonzero(valid)
+
+
+def median_depth(d: np.ndarray) -> float:
+    """Median of the valid (finite, non-zero) readings; 0 when there is none."""
+    v = d[np.isfinite(d) & (d != 0)]
+    return float(np.median(v)) if v.size else 0.0
 
 
 def _depth_in_metres(depth, unit: str) -> np.ndarray:

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from .errors import SessionLogError
+from .frames import MAX_MEDIAN_DEPTH_M, median_above, median_depth
 
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # 16UC1: millimetres (ROS convention)
 
@@ -36,9 +37,36 @@ def depth_from_msg(msg) -> np.ndarray:
     if msg.encoding == "32FC1":
         return image_rows(msg, "<f4").astype(np.float32)
     if msg.encoding == "16UC1":
+        w, h, step = int(msg.width), int(msg.height), int(msg.step)
+        if w >= 8 and h > 0 and (step == 4 * w or (step == 2 * w and len(msg.data) == 4 * w * h)):
+            raise SessionLogError(f"depth is declared 16UC1 but holds 4 bytes per pixel ({w}x{h}, step {step}, "
+                                  f"{len(msg.data)} bytes): float32 data with the wrong encoding? (expected 32FC1)")
         return (image_rows(msg, "<u2").astype(np.float32) / np.float32(1000.0)).astype(np.float32)
     raise SessionLogError(f"depth encoding '{msg.encoding}' is not supported (expected one of {', '.join(DEPTH_ENCODINGS)})")
 
+
+# Float depth in millimetres (some tools write it so) read as metres puts every wall
+# kilometres away and every frame stays 'initializing'. An indoor depth camera's median
+# reading is never above MAX_MEDIAN_DEPTH_M (frames.py); millimetres put it at 250-50,000.
+MM_MEDIAN_RANGE = (250.0, 50_000.0)
+MM_NOTE = "depth holds millimetres"  # the start of the note: a reader warns once per read
+
+
+def depth_in_metres(msg) -> tuple[np.ndarray, str | None]:
+    """depth_from_msg, with 32FC1 depth whose median reading is a plausible indoor distance
+    in millimetres (and not in metres) converted to metres; the note says so, else None.
+    Depth implausible either way is left for CameraFrame to refuse."""
+    d = depth_from_msg(msg)
+    if msg.encoding != "32FC1":
+        return d, None
+    if not median_above(d, MAX_MEDIAN_DEPTH_M):  # (a comparison: the median itself costs ms per frame)
+        return d, None
+    median = median_depth(d)
+    if MM_MEDIAN_RANGE[0] <= median <= MM_MEDIAN_RANGE[1]:
+        note = (f"{MM_NOTE}, not metres (median reading {median:.0f} 'm', above the {MAX_MEDIAN_DEPTH_M:.0f} m "
+                "an indoor camera sees): converted to metres")
+        return (d.astype(np.float64) * 1e-3).astype(np.float32), note
+    return d, None
 
 
 # --- poses --------------------------------------------------------------------------------

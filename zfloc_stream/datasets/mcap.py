@@ -32,7 +32,7 @@ def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = F
     from ..session import read_session
 
     path = Path(path)
-    session = read_session(path, salvage=salvage)
+    session = read_session(path, salvage=salvage, settings=settings)
     index = session.frame_index()
     if index is not None:
         truth, kinds = index.ground_truth, set(index.kinds)

@@ -33,8 +33,10 @@ from ..config import Settings
 from ..drops import DropCounter
 from ..errors import FrameError, InputError, SessionLogError
 from ..frames import CameraFrame, LaserFrame
-from ..messages import depth_from_msg, matrix_from_quaternion
+from .. import lens
+from ..messages import depth_in_metres, matrix_from_quaternion
 from ..pose_interpolation import PoseTrack
+from ..session.ordering import MIB, held_at_once
 from .base import Sequence, register
 
 # role -> accepted schema names (rosbag2 writes "pkg/msg/Type"; older tools "pkg/Type")
@@ -131,6 +133,7 @@ class _Motion:
     dynamic: dict[str, tuple[str, PoseTrack]] = field(default_factory=dict)  # /tf child -> (parent, track)
     static: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)  # child -> (parent, T_parent_child)
     camera_info: tuple[np.ndarray, int, int] | None = None
+    distortion: tuple[str, tuple[float, ...]] = ("", ())  # CameraInfo distortion_model, d
     frame_stamps: list[int] = field(default_factory=list)  # header stamps of the sensor topic, file order
     sensor_frame: str = ""
 
@@ -187,6 +190,7 @@ class Ros2Bag:
         order = np.argsort(np.asarray(self.motion.frame_stamps, dtype=np.int64), kind="stable")
         self.usable: list[tuple[int, int]] = []  # (position in file, stamp), stamp order
         self.skipped: list[str] = []
+        self.notes: set[str] = set()  # changes made to the data (millimetres converted...), warned once
         for i in order:
             stamp = self.motion.frame_stamps[i]
             _, reason = self.track.at(stamp)
@@ -218,15 +222,32 @@ class Ros2Bag:
                 if c.message_encoding == "cdr" and c.schema_id in summary.schemas}
 
     def _decoded(self, roles):
-        """(role, decoded message) for the given roles, in file order."""
+        """(role, decoded message) for the given roles, in log-time order where the bag has
+        a chunk index (a bag written grouped by topic or shuffled then holds one chunk per
+        topic, or what logging.reorder_max_mb allows, at a time), else in file order."""
         by_topic = {self.topics[r]: r for r in roles if r in self.topics}
         with self._open() as f:
             reader = make_reader(f, decoder_factories=[DecoderFactory()])
             try:
-                for _, channel, _, msg in reader.iter_decoded_messages(topics=list(by_topic), log_time_order=False):
+                in_order = self._check_reorder(reader.get_summary(), by_topic)
+                for _, channel, _, msg in reader.iter_decoded_messages(topics=list(by_topic), log_time_order=in_order):
                     yield by_topic[channel.topic], msg
             except (McapError, ValueError, OSError, EOFError, KeyError) as err:
                 raise SessionLogError(f"{self.path}: cannot decode the bag ({type(err).__name__}: {err})") from None
+
+    def _check_reorder(self, summary, topics) -> bool:
+        """Whether to read in log-time order (a chunk index to merge the chunks by); refuses
+        a merge that would hold more than logging.reorder_max_mb at once."""
+        if summary is None or not summary.chunk_indexes:
+            return False  # (without an index a log-time read would load the whole file)
+        ids = {cid for cid, c in summary.channels.items() if c.topic in topics}
+        chunks = [c for c in summary.chunk_indexes if not c.message_index_offsets or ids & set(c.message_index_offsets)]
+        need, limit = held_at_once(chunks), self.settings.logging.reorder_max_mb
+        if need > limit * MIB:
+            raise InputError(f"{self.path}: its messages are far out of log-time order: reading them in order holds "
+                             f"{need / MIB:.0f} MiB of chunks at once, over the limit of {limit} MiB "
+                             "(logging.reorder_max_mb; raise it, or rewrite the bag in log-time order)")
+        return True
 
     def _read_motion(self) -> _Motion:
         gap = self.settings.datasets.ros2.max_odometry_gap
@@ -244,6 +265,10 @@ class Ros2Bag:
                 elif role == "camera_info" and m.camera_info is None:
                     K = np.array(msg.k, dtype=float).reshape(3, 3)
                     m.camera_info = (K, int(msg.width), int(msg.height))
+                    D = tuple(float(v) for v in msg.d)
+                    if not np.isfinite(D).all():
+                        raise SessionLogError(f"distortion coefficients {list(D)} contain NaN or inf")
+                    m.distortion = (str(msg.distortion_model), D)
                 elif role in ("tf", "tf_static"):
                     for tr in msg.transforms:
                         T = _transform_matrix(tr.transform.translation, tr.transform.rotation)
@@ -297,10 +322,20 @@ class Ros2Bag:
             if encoding not in DEPTH_ENCODINGS:
                 raise FrameError(f"depth image encoding '{msg.encoding}' is not a depth encoding ({', '.join(DEPTH_ENCODINGS)})")
             msg.encoding = encoding
-            depth = depth_from_msg(msg)
+            depth, note = depth_in_metres(msg)
             K, width, height = self.motion.camera_info
             if (width, height) != (0, 0) and (height, width) != depth.shape:
                 raise FrameError(f"CameraInfo is for {width}x{height} images but depth is {depth.shape[1]}x{depth.shape[0]}")
+            model, D = self.motion.distortion
+            if lens.is_distorted(D):
+                if lens.supported(model):
+                    depth = lens.undistort([depth], K, model, D)[0]
+                else:
+                    note = note or (f"{self.topics['camera_info']} distortion model '{model}' is not supported "
+                                    f"({', '.join(lens.MODELS)}): its coefficients {list(D)} ignored, depth used as it is")
+            if note is not None and note.split(" (")[0] not in self.notes:
+                self.notes.add(note.split(" (")[0])
+                warnings.warn(f"{self.path}: {self.topics[self.kind]}: {note} (first at t={t:.6f})", stacklevel=3)
             return CameraFrame(depth, None, K, T, t)
         except (SessionLogError, FrameError) as err:  # one unusable frame: skip it, say why
             self.skipped.append(f"{self.topics[self.kind]} frame at t={t:.6f} skipped: {err}")

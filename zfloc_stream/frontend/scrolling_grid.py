@@ -12,7 +12,10 @@ import math
 
 import numpy as np
 
+from ..errors import FrameError
 from ..numba_support import njit
+
+MAX_CELL = 2.0**52  # cell indices stay exact integers in float64 and far inside int64
 
 
 class ScrollingGrid:
@@ -30,6 +33,9 @@ class ScrollingGrid:
         self._count = np.zeros(n * n, dtype=np.int32)  # scratch of unique_flat, all zero between calls
 
     def centre_on(self, xy: np.ndarray, slack_cells: int) -> None:
+        if not all(math.isfinite(v) and abs(v / self.res) < MAX_CELL for v in xy):  # before any state changes
+            raise FrameError(f"position {list(map(float, xy))} m is beyond the map's cells (|x| / resolution < 2^52); "
+                             "frames bound their poses (frames.MAX_POSITION_M)")
         cx, cy = (int(np.floor(v / self.res)) for v in xy)
         half = self.n // 2
         if self.ix0 is None:

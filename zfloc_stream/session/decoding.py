@@ -91,13 +91,15 @@ def decode(faults, ch: Channel, record: Message, stamp_only: bool) -> tuple[int,
     its header stamp is read, where its bytes allow); None when it cannot be decoded."""
     if stamp_only:
         stamp = stamp_without_decoding(ch.topic, ch.stamp_field, record)
-        if stamp is not None:
+        if stamp is not None and stamp < S.MAX_NS:
             return stamp, None
     try:
         msg = ch.decode(record.data)
         stamp = record.log_time  # JSON status has no header stamp
         if ch.topic != S.TOPIC_STATUS and msg.HasField("timestamp") and S.from_stamp(msg.timestamp) > 0:
             stamp = S.from_stamp(msg.timestamp)
+        if stamp >= S.MAX_NS:  # numpy's int64 stamps (and the year 2262) end there
+            raise SessionLogError(f"its time {stamp} ns is beyond 2^63 ns (the year 2262)")
     except SessionLogError as err:
         fail_message(faults, ch, record, stamp_only, str(err))
         return None

@@ -8,17 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-from mcap.records import Chunk, Message
-from mcap.stream_reader import StreamReader, breakup_chunk
-from mcap_protobuf.decoder import DecoderFactory
+from mcap.records import Message
 
-from ..errors import SessionLogError
 from . import schemas as S
-from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Channel, Ref, channel_message, decode, make_channel
+from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Ref, channel_message, decode
 from .frame_grouping import FrameGrouper
+from .ordering import chunk_indexes, chunk_messages, ordered_messages, summary_channels
 
 SLOTS = tuple(EXPECTED_SCHEMAS)  # FrameIndex.refs: one slot per session topic, in this order
 # payloads a frame index never decodes in our own files (their stamps are read from the bytes)
@@ -40,10 +37,6 @@ class FrameIndex:
 
     def __len__(self) -> int:
         return len(self.stamps)
-
-
-def chunk_indexes(summary) -> list:
-    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)  # file order
 
 
 def build_index(session) -> FrameIndex | None:
@@ -102,37 +95,13 @@ def build_index(session) -> FrameIndex | None:
 
 
 def indexed_messages(session, f, stamp_only, counted: list[int]) -> Iterator[tuple[str, int, Ref, dict]]:
-    """As _messages, over the chunks in file order; each message a _Ref to its place."""
+    """As decoding.messages, in log-time order (ordering.py); each message a Ref to its place."""
     channels = summary_channels(session)
-    for c, chunk in enumerate(chunk_indexes(session.summary)):
-        for pos, record in enumerate(chunk_messages(session.path, f, chunk)):
-            counted[0] += 1
-            got = channel_message(session, channels, record, stamp_only)
-            if got is not None:
-                ch, stamp, msg = got
-                yield ch.topic, stamp, Ref((c, pos), msg), ch.metadata
-
-
-def summary_channels(session) -> dict[int, Channel | None]:
-    if "channels" not in session.shared:
-        factory = DecoderFactory()
-        session.shared["channels"] = {
-            cid: make_channel(session, ch, session.summary.schemas, factory) for cid, ch in sorted(session.summary.channels.items())
-        }
-    return session.shared["channels"]
-
-
-def chunk_messages(path, f, chunk) -> list[Message]:
-    """The messages of one chunk (found by its index), in their order in the chunk."""
-    try:
-        f.seek(chunk.chunk_start_offset)
-        record = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=Path(path).stat().st_size).records)
-        if not isinstance(record, Chunk):
-            raise ValueError(f"a {type(record).__name__} record where the index puts a chunk")
-        return [r for r in breakup_chunk(record, validate_crc=True) if isinstance(r, Message)]
-    except Exception as err:  # noqa: BLE001 - any parser fault on damaged bytes
-        what = f"{type(err).__name__}: {err}".replace("\n", " ")
-        raise SessionLogError(f"{path}: damaged chunk at byte {chunk.chunk_start_offset} ({what}); try --salvage") from None
+    for where, record in ordered_messages(session, f, counted):
+        got = channel_message(session, channels, record, stamp_only)
+        if got is not None:
+            ch, stamp, msg = got
+            yield ch.topic, stamp, Ref(where, msg), ch.metadata
 
 
 def records_indexed(session, index: FrameIndex, start: int, stop: int | None, outputs: bool) -> Iterator:

@@ -39,9 +39,10 @@ class DamageAwareReader(StreamReader):
         return super()._read_record(opcode, length)
 
 
-def file_records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
-    """Records in file order, chunks broken up. Faults raise (or, salvaging, end the scan
-    at a damaged record and skip a damaged chunk or a zeroed region)."""
+def file_records(path: Path, salvage: bool, problems: list[str], see=None) -> Iterator:
+    """Records in file order, chunks broken up (each shown to `see` first). Faults raise
+    (or, salvaging, end the scan at a damaged record and skip a damaged chunk or a zeroed
+    region)."""
     size = path.stat().st_size
     zeroed_from = None  # start of the zeroed region being skipped (salvage)
     with open(path, "rb") as f:
@@ -77,8 +78,13 @@ def file_records(path: Path, salvage: bool, problems: list[str]) -> Iterator:
                         raise SessionLogError(f"{path}: {what}") from None
                     problems.append(f"chunk skipped: {what}")
                     continue
-                yield from inner
+                for r in inner:
+                    if see is not None:
+                        see(r)
+                    yield r
             else:
+                if see is not None:
+                    see(record)
                 yield record
             if isinstance(record, Footer):
                 return
@@ -133,7 +139,29 @@ def open_indexed(path: Path) -> tuple[dict, dict, Summary | None]:
     return metadata, attachments, summary
 
 
-def open_scanning(path: Path, problems: list[str]) -> tuple[dict, dict]:
+def open_salvaged(path: Path) -> tuple[dict, dict, Summary | None]:
+    """Metadata and attachments found by a scan of top-level records, and the summary
+    where the file's end survived (its chunk index then reaches the chunks after a
+    damaged one, and its channels those whose definitions the damage took)."""
+    metadata, attachments = open_scanning(path)
+    summary = None
+    try:
+        with open(path, "rb") as f:
+            reader = SeekingReader(f, validate_crcs=True, record_size_limit=path.stat().st_size)
+            summary = reader.get_summary()
+            if summary is not None:
+                size = path.stat().st_size
+                summary.chunk_indexes = [c for c in summary.chunk_indexes if 0 < c.chunk_start_offset < size]
+                for m in reader.iter_metadata():
+                    metadata.setdefault(m.name, dict(m.metadata))
+    except Exception:  # noqa: BLE001 - no usable summary: the scan is all there is
+        pass
+    if summary is not None and not summary.chunk_indexes:
+        summary = None
+    return metadata, attachments, summary
+
+
+def open_scanning(path: Path) -> tuple[dict, dict]:
     """Metadata and attachments found by a scan of top-level records (salvage)."""
     metadata: dict = {}
     attachments: dict = {}

@@ -10,7 +10,9 @@ timestamp make a frame (odometry at its own rate and stamps is interpolated at t
 frame's timestamp instead: pose_interpolation.py); /camera/labels and /groundtruth/pose of that timestamp are added
 when present; the calibration is the latest one at or before it. A frame is complete once
 every input topic has moved past its timestamp, so only a few frames are ever buffered.
-Files from other tools on the same topics read the same way.
+Messages are handed to the grouping in log-time order where the file has a chunk index
+(ordering.py: another tool may write them grouped by topic or shuffled), else in file
+order. Files from other tools on the same topics read the same way.
 
 Every fault ends as a SessionLogError naming the file and what is wrong. With
 salvage=True a truncated or damaged file yields what its intact chunks hold, and the
@@ -48,10 +50,11 @@ from ..frames import CameraFrame, LaserFrame
 from ..pose_interpolation import PoseTrack
 from . import schemas as S
 from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
-from .decoding import OUTPUT_TOPICS, messages
+from .decoding import OUTPUT_TOPICS, channel_message, messages
 from .frame_grouping import FrameGrouper
 from .frame_index import FrameIndex, build_index, records_indexed
-from .mcap_file import check_path, check_topics, file_records, open_indexed, open_scanning
+from .mcap_file import check_path, check_topics, file_records, open_indexed, open_salvaged
+from .ordering import OrderWatch, ordered_messages, summary_channels
 
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 
@@ -116,7 +119,7 @@ class Session:
         summary: Summary | None = None,
     ):
         self.path = path
-        self.summary = summary  # schemas, channels, chunk indexes (None: salvage or no summary)
+        self.summary = summary  # schemas, channels, chunk indexes (None: no summary; salvage: where the file's end survived)
         self.shared: dict = {}  # frame index and channel decoders, shared with fresh() copies
         self.salvage = salvage
         self.metadata = metadata
@@ -128,6 +131,7 @@ class Session:
         # the settings the floorplan was built with, logged only where they differ
         self.floorplan_settings: Settings | None = self._parse_settings(S.METADATA_FLOORPLAN_SETTINGS, "logged floorplan settings")
         self._floorplan = None
+        self.read_settings: Settings | None = None  # the reader's limits, where the caller gives them
 
     # --- contents -------------------------------------------------------------------------
     def _parse_settings(self, record: str, what: str) -> Settings | None:
@@ -220,9 +224,8 @@ class Session:
             return
         self.problems = []
         grouper = FrameGrouper(self)
-        records = file_records(self.path, self.salvage, self.problems)
         index = 0
-        for stamp, parts in grouper.stamps(messages(self, records, () if outputs else OUTPUT_TOPICS)):
+        for stamp, parts in grouper.stamps(self._messages(() if outputs else OUTPUT_TOPICS)):
             rec = self.make_record(index, stamp, parts, grouper.odometry, outputs)
             if rec is None:
                 continue
@@ -231,6 +234,27 @@ class Session:
                     return
                 yield rec
             index += 1
+
+    def _messages(self, stamp_only) -> Iterator[tuple[str, int, object, dict]]:
+        """The session topics' messages in log-time order where the file has a chunk index
+        (ordering.py; salvaging too, where its summary survived), else in file order."""
+        if self.summary is None or not self.summary.chunk_indexes or self.summary.statistics is None:
+            why = "the file has no chunk index" if not self.salvage else "the damaged file has no readable summary"
+            watch = OrderWatch(self.problems, why)
+            records = file_records(self.path, self.salvage, self.problems, watch.see)
+            yield from messages(self, records, stamp_only)
+            return
+        channels = summary_channels(self)
+        counted = [0]
+        with open(self.path, "rb") as f:
+            for _, record in ordered_messages(self, f, counted):
+                got = channel_message(self, channels, record, stamp_only)
+                if got is not None:
+                    ch, stamp, msg = got
+                    yield ch.topic, stamp, msg, ch.metadata
+        missing = self.summary.statistics.message_count - counted[0]
+        if missing > 0 and not self.salvage:
+            self.problems.append(f"{missing} message(s) outside the file's chunks skipped (the chunk index does not reach them)")
 
     def complete_frame(self, stamp: int, parts: dict, odometry: PoseTrack | None) -> bool:
         """Whether the messages of a stamp make a frame (else the reason is noted); adds
@@ -279,7 +303,10 @@ class Session:
                 labels = parts.get(S.TOPIC_LABELS, (None,))[0]
                 depth = parts.get(S.TOPIC_DEPTH, (None,))[0]
                 image = parts.get(S.TOPIC_IMAGE, (None,))[0]
-                frame = camera_frame_from_msgs(depth, labels, calib, odom, gt, axis, S.ns_to_seconds(stamp), image)
+                notes: list[str] = []
+                frame = camera_frame_from_msgs(depth, labels, calib, odom, gt, axis, S.ns_to_seconds(stamp), image, notes)
+                for note in notes:
+                    self.note_once(note, where)
             else:
                 scan, meta = parts[S.TOPIC_SCAN]
                 cfg = (self.settings or Settings()).logging
@@ -317,6 +344,13 @@ class Session:
         return self.shared["index"]
 
     # --- faults ---------------------------------------------------------------
+    def note_once(self, note: str, where: str) -> None:
+        """A change made to what the file holds (millimetres converted, distortion
+        ignored), noted once per read at the first frame it concerns."""
+        key = note.split(" (")[0]
+        if not any(p.startswith(key) for p in self.problems):
+            self.problems.append(f"{note} (first at {where})")
+
     def fail(self, what: str) -> None:
         """A fault in the file: raise, or in salvage mode note it and go on."""
         if not self.salvage:
@@ -333,15 +367,16 @@ def _float_meta(meta: dict, key: str, default: float, path: Path) -> float:
         raise SessionLogError(f"{path}: /scan channel metadata {key}={meta[key]!r} is not a number") from None
 
 
-def read_session(path: str | Path, salvage: bool = False) -> Session:
+def read_session(path: str | Path, salvage: bool = False, settings: Settings | None = None) -> Session:
     """Open a session file. Raises SessionLogError when it is missing, not MCAP, truncated
-    (unless salvage), damaged, or lacks the input topics."""
+    (unless salvage), damaged, or lacks the input topics. settings: the reader's limits
+    (logging.reorder_max_mb); default the file's logged settings, else the defaults."""
     path = Path(path)
     check_path(path)
     problems: list[str] = []
     summary = topics = None
     if salvage:
-        metadata, attachments = open_scanning(path, problems)
+        metadata, attachments, summary = open_salvaged(path)
     else:
         metadata, attachments, summary = open_indexed(path)
         if summary is not None:
@@ -349,4 +384,5 @@ def read_session(path: str | Path, salvage: bool = False) -> Session:
             check_topics(path, topics)
     session = Session(path, salvage, metadata, attachments, topics, summary)
     session.problems = problems
+    session.read_settings = settings
     return session

@@ -82,9 +82,12 @@ def crc32_hex(data: bytes) -> str:
 
 
 # --- time -----------------------------------------------------------------------------------
+MAX_NS = 1 << 63  # stamps are int64 ns (numpy arrays, the year 2262); MCAP's own log times go to 2^64
+
+
 def seconds_to_ns(t: float) -> int:
-    if not math.isfinite(t) or t < 0:
-        raise SessionLogError(f"timestamp {t} cannot be logged: MCAP times are finite and non-negative")
+    if not math.isfinite(t) or t < 0 or t * 1e9 >= MAX_NS:
+        raise SessionLogError(f"timestamp {t} cannot be logged: session times are finite, non-negative and before 2^63 ns (the year 2262)")
     return int(round(t * 1e9))
 
 
@@ -166,8 +169,16 @@ def calibration_to_msg(K: np.ndarray, width: int, height: int, ns: int, frame_id
     )
 
 
+def distortion_from_msg(msg: CameraCalibration) -> tuple[str, tuple[float, ...]]:
+    """(distortion model, D); refused where a coefficient is NaN or inf."""
+    D = tuple(float(v) for v in msg.D)
+    if not all(math.isfinite(v) for v in D):
+        raise SessionLogError(f"calibration D {list(D)} contains NaN or inf")
+    return str(msg.distortion_model), D
+
+
 def calibration_from_msg(msg: CameraCalibration) -> tuple[np.ndarray, int, int]:
-    """(K 3x3, width, height). Distortion is ignored: depth images are taken as rectified."""
+    """(K 3x3, width, height). Distortion: distortion_from_msg (removed by assemble.py)."""
     if len(msg.K) != 9:
         raise SessionLogError(f"calibration K has {len(msg.K)} values, expected 9")
     K = np.array(msg.K, dtype=float).reshape(3, 3)

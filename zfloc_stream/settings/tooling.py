@@ -26,6 +26,9 @@ class LoggingSettings(Section):
     max_pending_batches: int = Field(4, ge=1, le=10_000)  # batches (2 per frame) queued for the worker; a crash loses them too
     foreign_scan_range_min: float = Field(0.01, ge=0, le=1000)  # m, LaserScan without zfloc range metadata
     foreign_scan_range_max: float = Field(100.0, gt=0, le=10_000)  # m
+    # MiB of chunks a read may hold at once to hand messages on in log-time order: a file
+    # in order holds one chunk, one grouped by topic one per topic (session/ordering.py)
+    reorder_max_mb: int = Field(2048, ge=1, le=1 << 20)
     success_distance: float = Field(1.0, gt=0, le=1000)  # m, replay summary: SR@1m as in the paper...
     success_last_frames: int = Field(10, ge=1, le=1_000_000)  # ...every one of the final frames within the distance
 

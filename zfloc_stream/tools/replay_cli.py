@@ -107,6 +107,7 @@ def run(args) -> int:
     args.check = args.check or args.exact
     session = read_session(args.session, salvage=args.salvage)
     settings = replay_settings(session, args.config, args.set)
+    session.read_settings = settings  # the reader's limits (logging.reorder_max_mb) as given
     tolerance = EXACT if args.exact else Tolerance(settings.replay.rtol, settings.replay.atol)
     if args.check:
         require_outputs(session)
