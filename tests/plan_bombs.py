@@ -137,3 +137,44 @@ def geojson_dots(path: Path) -> Path:
     feats += [feature({"type": "LineString", "coordinates": [[0, y], [0, y + 0.2]]}) for y in range(0, 8, 2)]
     path.write_text(json.dumps(collection(*feats)))
     return path
+
+
+def fuzz_bomb_plan(rng: np.random.Generator, d: Path, case: int, big: bool = False) -> tuple[Path, dict]:
+    """One seeded plan of issue 44's families: (path, load_vector_floorplan keyword
+    arguments). Small sizes by default (CI); big=True draws up to the issue's sizes."""
+    family = case % 12
+    n = int(rng.integers(10, 100_000 if big else 2_000))
+    p = d / f"bomb{case}"
+    if family == 0:
+        return dxf_insert_tree(p.with_suffix(".dxf"), int(rng.integers(1, 9 if big else 7)), int(rng.integers(2, 11))), {}
+    if family == 1:
+        return dxf_nested_walls(p.with_suffix(".dxf"), int(rng.integers(1, 80))), {}
+    if family == 2:
+        return dxf_collinear(p.with_suffix(".dxf"), n, seed=case), {}
+    if family == 3:
+        return dxf_pieces(p.with_suffix(".dxf"), n, side=float(rng.uniform(10, 60)), seed=case), {}
+    if family == 4:
+        return dxf_scatter(p.with_suffix(".dxf"), n // 10 if not big else n, side=float(rng.uniform(10, 60)), seed=case), {}
+    if family == 5:
+        return svg_long_path(p.with_suffix(".svg"), 2 * n), {"scale": 0.01}
+    if family == 6:
+        return svg_use_fanout(p.with_suffix(".svg"), int(rng.integers(1, 8)), int(rng.integers(2, 11))), {"scale": 0.01}
+    if family == 7:
+        transform = ("rotate({})", "scale(-1, {})", "skewX({})", "skewY({})", "matrix(1 0 0.5 1 {} 0)")[int(rng.integers(5))]
+        return svg_transformed_group(p.with_suffix(".svg"), transform.format(round(float(rng.uniform(-80, 80)), 2))), {"scale": 0.01}
+    if family == 8:
+        path = p.with_suffix(".svg")
+        path.write_text(BILLION_LAUGHS if rng.random() < 0.5 else BILLION_LAUGHS.replace("&j;", "&" + "abcdefghij"[int(rng.integers(10))] + ";"))
+        return path, {"scale": 0.01}
+    if family == 9:
+        return geojson_big_int(p.with_suffix(".geojson"), int(rng.integers(1, 20_000))), {}
+    if family == 10:
+        value = ("5", True, False, "", None, [1], {"x": 1}, "1e3", 1e308)[int(rng.integers(9))]
+        crs = None if rng.random() < 0.5 else ("EPSG:2263", "urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:32633", 5)[int(rng.integers(4))]
+        return geojson_with(p.with_suffix(".geojson"), coordinate=value, crs=crs), ({"scale": 0.3048} if rng.random() < 0.3 else {})
+    # family 11: a room in a declared unit, drawn in another
+    from fuzz_inputs import BOX
+
+    factor = 10.0 ** int(rng.integers(-4, 4))
+    unit = int(rng.choice([1, 2, 4, 5, 6, 14]))
+    return write_dxf(p.with_suffix(".dxf"), [tuple(tuple(factor * v for v in q) for q in s) for s in BOX], unit), {}

@@ -144,3 +144,33 @@ def test_dxf_declared_mm_but_drawn_in_metres_is_refused_naming_scale(tmp_path):
 def test_plan_without_walls_is_refused(tmp_path, capsys):
     code, err = _cli_error(geojson_dots(tmp_path / "dots.geojson"), tmp_path, capsys)
     assert code == 2 and len(err) == 1 and "no wall line" in err[0] and "dots.geojson" in err[0], err
+
+
+def _fuzz(seed: int, n: int, d, big: bool) -> dict[str, int]:
+    from plan_bombs import fuzz_bomb_plan
+
+    rng = np.random.default_rng(seed)
+    outcomes = {"loaded": 0, "refused": 0}
+    for case in range(n):
+        path, kwargs = fuzz_bomb_plan(rng, d, case, big)
+        try:
+            load_vector_floorplan(path, **kwargs)
+            outcomes["loaded"] += 1
+        except FloorplanError as err:
+            assert "\n" not in str(err) and path.name in str(err), (case, str(err))
+            outcomes["refused"] += 1
+        path.unlink()
+    return outcomes
+
+
+def test_fuzzed_bomb_families_load_or_fail_in_one_line(tmp_path):
+    outcomes = _fuzz(44, 36, tmp_path, big=False)
+    assert outcomes["loaded"] >= 8 and outcomes["refused"] >= 8, outcomes
+
+
+@pytest.mark.slow
+def test_fuzzed_bomb_families_at_the_issues_sizes(tmp_path):
+    """Up to 100,000 segments, 8 levels of INSERTs (benchmarks/fuzz_inputs.py --bombs runs
+    more with a memory budget and an alarm per case)."""
+    outcomes = _fuzz(4400, 60, tmp_path, big=True)
+    assert outcomes["loaded"] and outcomes["refused"], outcomes
