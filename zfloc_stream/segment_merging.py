@@ -196,8 +196,13 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
             i += 1
             fresh = True
             continue
+        before_join = segs[i].copy()
         x0, y0, dx, dy, old_lo, old_hi, lo, hi = _join_into(segs, i, hit)
         alive[hit] = False
+        # whether an earlier row joins i depends on i's ends only: unchanged (a piece inside
+        # i's extent), nothing earlier can join it now
+        moved = (segs[i, 0, 0] != before_join[0, 0] or segs[i, 0, 1] != before_join[0, 1]
+                 or segs[i, 1, 0] != before_join[1, 0] or segs[i, 1, 1] != before_join[1, 1])
         # the grown part: registered, and its neighbours become candidates of i
         before = n_cand
         if lo < old_lo:
@@ -215,7 +220,7 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
             n_cand = keep
             cand[:n_cand] = np.sort(cand[:n_cand])
             start = 0
-        while i > 0:  # an earlier row (which joined nothing before) may join the grown one now
+        while moved and i > 0:  # an earlier row (which joined nothing before) may join the grown one now
             mark_back += 1
             n_back = 0
             for p in range(2):
