@@ -70,11 +70,15 @@ def _bucket(cx, cy, mask):
 
 
 @njit
-def _register(heads, rows, nexts, count, row, x0, y0, dx, dy, t0, t1, cell, mask):
+def _register(heads, rows, nexts, count, row, x0, y0, dx, dy, t0, t1, cell, mask, skip_first=False):
     """Register row in the cells of samples every cell / 2 along x0 + t (dx, dy), t in
-    [t0, t1] (both ends included); returns the new entry count and arrays (grown)."""
-    n = max(int(math.ceil((t1 - t0) / (0.5 * cell))), 1)
+    [t0, t1] (both ends included; with skip_first not in t0's cell, registered before);
+    returns the new entry count and arrays (grown)."""
+    n = max(int(math.ceil(abs(t1 - t0) / (0.5 * cell))), 1)
     last_cx, last_cy = np.int64(-(2 ** 62)), np.int64(-(2 ** 62))
+    if skip_first:
+        last_cx = np.int64(math.floor((x0 + t0 * dx) / cell))
+        last_cy = np.int64(math.floor((y0 + t0 * dy) / cell))
     for s in range(n + 1):
         t = t0 + (t1 - t0) * s / n
         cx = np.int64(math.floor((x0 + t * dx) / cell))
@@ -126,11 +130,22 @@ def _gather(heads, rows, nexts, alive, stamp, mark, x, y, cell, mask, out, n_out
 
 
 @njit
-def _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, t0, t1, cell, mask, out, n_out):
-    n = max(int(math.ceil((t1 - t0) / (0.5 * cell))), 1)
+def _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, t0, t1, cell, mask, out, n_out, skip_first=False):
+    """_gather around samples every cell / 2 along x0 + t (dx, dy), t in [t0, t1], once per
+    cell (with skip_first not around t0's cell, gathered before)."""
+    n = max(int(math.ceil(abs(t1 - t0) / (0.5 * cell))), 1)
+    last_cx, last_cy = np.int64(-(2 ** 62)), np.int64(-(2 ** 62))
     for s in range(n + 1):
         t = t0 + (t1 - t0) * s / n
-        out, n_out = _gather(heads, rows, nexts, alive, stamp, mark, x0 + t * dx, y0 + t * dy, cell, mask, out, n_out)
+        x, y = x0 + t * dx, y0 + t * dy
+        cx, cy = np.int64(math.floor(x / cell)), np.int64(math.floor(y / cell))
+        if s == 0 and skip_first:
+            last_cx, last_cy = cx, cy
+            continue
+        if cx == last_cx and cy == last_cy:
+            continue
+        last_cx, last_cy = cx, cy
+        out, n_out = _gather(heads, rows, nexts, alive, stamp, mark, x, y, cell, mask, out, n_out)
     return out, n_out
 
 
@@ -159,6 +174,12 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
         dx, dy, length = _direction(segs, r)
         count, rows, nexts = _register(heads, rows, nexts, count, r, segs[r, 0, 0], segs[r, 0, 1], dx, dy,
                                        -margin, length + margin, cell, mask)
+    # rows the scan has passed (the only ones a backward search can find), registered as
+    # the scan leaves them: a backward search does not wade through the rows ahead
+    heads_back = np.full(size, -1, np.int64)
+    rows_back = np.empty(16 * n + 16, np.int64)
+    nexts_back = np.empty(16 * n + 16, np.int64)
+    count_back = 0
     alive = np.ones(n, np.bool_)
     stamp = np.full(n, -1, np.int64)  # forward candidates of row i: gathered once each
     stamp_back = np.full(n, -1, np.int64)
@@ -192,7 +213,10 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
             if j > i and alive[j] and _joins(segs, i, j, cos_tol, offset, gap):
                 hit = j
                 break
-        if hit < 0:
+        if hit < 0:  # row i is done (until an absorption moves the scan back to it)
+            dx, dy, length = _direction(segs, i)
+            count_back, rows_back, nexts_back = _register(heads_back, rows_back, nexts_back, count_back, i, segs[i, 0, 0], segs[i, 0, 1],
+                                                          dx, dy, -margin, length + margin, cell, mask)
             i += 1
             fresh = True
             continue
@@ -205,12 +229,12 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
                  or segs[i, 1, 0] != before_join[1, 0] or segs[i, 1, 1] != before_join[1, 1])
         # the grown part: registered, and its neighbours become candidates of i
         before = n_cand
-        if lo < old_lo:
-            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, lo - margin, old_lo - margin, cell, mask)
-            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, lo - margin, old_lo - margin, cell, mask, cand, n_cand)
+        if lo < old_lo:  # walked from the old end outward: its cell was registered and gathered
+            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_lo - margin, lo - margin, cell, mask, True)
+            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, old_lo - margin, lo - margin, cell, mask, cand, n_cand, True)
         if hi > old_hi:
-            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask)
-            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask, cand, n_cand)
+            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask, True)
+            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask, cand, n_cand, True)
         if n_cand > before:  # keep the live later rows, in order
             keep = 0
             for k in range(n_cand):
@@ -224,7 +248,7 @@ def _merge_scan(segs, cos_tol, offset, gap, cell):
             mark_back += 1
             n_back = 0
             for p in range(2):
-                back, n_back = _gather(heads, rows, nexts, alive, stamp_back, mark_back, segs[i, p, 0], segs[i, p, 1], cell, mask, back, n_back)
+                back, n_back = _gather(heads_back, rows_back, nexts_back, alive, stamp_back, mark_back, segs[i, p, 0], segs[i, p, 1], cell, mask, back, n_back)
             first = -1
             if n_back:
                 back[:n_back] = np.sort(back[:n_back])
