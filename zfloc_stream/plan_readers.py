@@ -25,6 +25,7 @@ ARC_CHORD = 0.05  # m, arcs and curves are flattened to chords deviating at most
 CIRCLE_FIT_TOLERANCE = 0.02  # relative spread of a ring's vertex radii for it to be a circle
 MIN_CIRCLE_VERTICES = 8
 MAX_CURVE_CHORDS = 1_000_000  # a longer SVG curve (50 km at ARC_CHORD) is a unit mistake, not a wall
+MIN_PLAN_SPAN = 1.0  # m: a drawing smaller than this either way is in another unit than declared
 
 
 @dataclass
@@ -59,6 +60,20 @@ class VectorGeometry:
         if not math.isfinite(reach) or reach > MAX_COORDINATE:
             raise FloorplanError(f"{source}: the drawing reaches {reach:.3g} m from 0 (more than {MAX_COORDINATE:.0e} m): "
                                  "a wrong unit, or a stray coordinate")
+
+    def check_span(self, source, unit: str) -> None:
+        """A floor is metres across: a drawing under MIN_PLAN_SPAN both ways was drawn in a
+        larger unit than the one it is read in (metres under a millimetre header)."""
+        points = np.vstack([*self.polylines, *self.rings, np.zeros((0, 2))])
+        ends = [points.min(axis=0), points.max(axis=0)] if len(points) else []
+        for x, y, r in self.circles:
+            ends += [np.array([x - r, y - r]), np.array([x + r, y + r])]
+        if not ends:
+            return
+        span = np.max(ends, axis=0) - np.min(ends, axis=0)
+        if span.max() < MIN_PLAN_SPAN:
+            raise FloorplanError(f"{source}: the drawing spans {span[0]:.3g} x {span[1]:.3g} m read in {unit}: too small for a floor; "
+                                 "if it is drawn in another unit, pass --scale METRES_PER_UNIT (1 for metres)")
 
     def scaled(self, factor: float, flip_y: bool = False) -> VectorGeometry:
         s = np.array([factor, -factor if flip_y else factor])
@@ -125,7 +140,38 @@ def _dxf_units(doc, path: Path, scale: float | None) -> float:
         raise FloorplanError(f"{path}: DXF header $INSUNITS = {code}{name} is not a length unit this reader converts: pass --scale METRES_PER_UNIT") from None
 
 
-def read_dxf(path: Path, scale, layers, skip_layers) -> VectorGeometry:
+def _dxf_expansion(doc, path: Path, max_entities: int) -> int:
+    """Entities the model space expands to, every INSERT counted as its block's expansion
+    (times its MINSERT grid), computed per block once, before anything is expanded:
+    FloorplanError past max_entities, or for a block that contains itself."""
+    counts: dict[str, int] = {}
+
+    def count(entities, inside: tuple[str, ...]) -> int:
+        total = 0
+        for e in entities:
+            if e.dxftype() != "INSERT":
+                total += 1
+                continue
+            name = e.dxf.get("name", "")
+            if len(inside) >= MAX_NESTING:
+                raise FloorplanError(f"{path}: DXF blocks nested deeper than {MAX_NESTING} levels")
+            if name in inside:
+                raise FloorplanError(f"{path}: DXF block {name!r} contains itself (INSERT cycle through {' > '.join(inside)})")
+            if name not in counts:
+                block = doc.blocks.get(name)
+                counts[name] = 0 if block is None else count(block, (*inside, name))
+            grid = max(int(e.dxf.get("row_count", 1) or 1), 1) * max(int(e.dxf.get("column_count", 1) or 1), 1)
+            total += 1 + grid * counts[name]
+            if total > max_entities:
+                raise FloorplanError(
+                    f"{path}: the DXF expands to more than {max_entities:,} entities (block references nested in blocks): "
+                    "a bomb, not a floor (--set datasets.vector_floorplan.max_entities=N raises the limit)")
+        return total
+
+    return count(doc.modelspace(), ())
+
+
+def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_000) -> VectorGeometry:
     import ezdxf
     from ezdxf import path as ezpath
 
@@ -138,6 +184,7 @@ def read_dxf(path: Path, scale, layers, skip_layers) -> VectorGeometry:
     except Exception as err:  # noqa: BLE001 - ezdxf's parser raises StopIteration, ValueError... on damaged files
         raise FloorplanError(f"{path}: not a readable DXF file ({type(err).__name__}: {err})") from None
     factor = _dxf_units(doc, path, scale)
+    _dxf_expansion(doc, path, max_entities)  # also bounds the nesting: each level is an entity
     wanted = None if not layers else {name.lower() for name in layers}
     skipped = {name.lower() for name in skip_layers or ()}
     known = {layer.dxf.name.lower() for layer in doc.layers}
@@ -153,7 +200,7 @@ def read_dxf(path: Path, scale, layers, skip_layers) -> VectorGeometry:
             kind = e.dxftype()
             what = f"{path}: DXF {kind} (handle {e.dxf.get('handle', '?')})"
             try:
-                if kind == "INSERT" and depth < 8:  # a block reference: its entities, placed
+                if kind == "INSERT":  # a block reference: its entities, placed (counted and cycle-free: _dxf_expansion)
                     visit(e.virtual_entities(), depth + 1)
                     continue
                 if (wanted is not None and layer not in wanted) or layer in skipped:
@@ -175,7 +222,22 @@ def read_dxf(path: Path, scale, layers, skip_layers) -> VectorGeometry:
     visit(doc.modelspace())
     geometry = geometry.scaled(factor)
     geometry.check_reach(path)
+    if scale is None:
+        geometry.check_span(path, _dxf_unit_name(doc))
     return geometry
+
+
+def _dxf_unit_name(doc) -> str:
+    """The header's unit, as the span check names it."""
+    import ezdxf.units
+
+    code = int(real_number(doc.header.get("$INSUNITS", 0)) or 0)
+    if code in _DXF_EXTRA_UNITS:
+        return f"{_DXF_EXTRA_UNITS[code][0]} ($INSUNITS = {code})"
+    try:
+        return f"{ezdxf.units.unit_name(code)} ($INSUNITS = {code})"
+    except (KeyError, ValueError, IndexError, TypeError):
+        return f"$INSUNITS = {code}"
 
 
 def _dxf_defining_points(e) -> list[tuple[float, float]]:
@@ -193,11 +255,53 @@ def _dxf_defining_points(e) -> list[tuple[float, float]]:
     return []
 
 
-def read_svg(path: Path, scale) -> VectorGeometry:
+def _svg_expansion(path: Path, max_entities: int) -> int:
+    """Elements the SVG expands to, every <use> counted as what it references (per id
+    once), before svgelements expands anything: FloorplanError past max_entities or for a
+    <use> that references itself. expat refuses entity bombs and reads no external entity."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except OSError as err:
+        raise FloorplanError(f"cannot read SVG floorplan {path}: {err.strerror or err}") from None
+    except (ET.ParseError, ValueError, RecursionError) as err:
+        raise FloorplanError(f"{path}: not a readable SVG file ({type(err).__name__}: {err})") from None
+    by_id = {e.get("id"): e for e in root.iter() if e.get("id")}
+    counts: dict[int, int] = {}
+    href_keys = ("href", "{http://www.w3.org/1999/xlink}href")
+
+    def count(element, inside: tuple[int, ...]) -> int:
+        key = id(element)
+        if key in counts:
+            return counts[key]
+        if key in inside:
+            raise FloorplanError(f"{path}: an SVG <use> references an element that contains it (a cycle)")
+        if len(inside) > 4 * MAX_NESTING:
+            raise FloorplanError(f"{path}: SVG elements nested deeper than {4 * MAX_NESTING} levels (with <use> references)")
+        total = 1
+        for child in element:
+            total += count(child, (*inside, key))
+        if element.tag.rsplit("}", 1)[-1] == "use":
+            ref = next((element.get(k) for k in href_keys if element.get(k)), "")
+            target = by_id.get(ref[1:]) if ref.startswith("#") else None
+            if target is not None:
+                total += count(target, (*inside, key))
+        if total > max_entities:
+            raise FloorplanError(f"{path}: the SVG expands to more than {max_entities:,} elements (<use> of groups of <use>): "
+                                 "a bomb, not a floor (--set datasets.vector_floorplan.max_entities=N raises the limit)")
+        counts[key] = total
+        return total
+
+    return count(root, ())
+
+
+def read_svg(path: Path, scale, max_entities: int = 1_000_000) -> VectorGeometry:
     import svgelements as se
 
     if scale is None:
         raise FloorplanError(f"{path}: an SVG floorplan has no real-world unit: pass --scale METRES_PER_UNIT (e.g. 0.01 when 1 unit = 1 cm)")
+    _svg_expansion(path, max_entities)
     try:
         svg = se.SVG.parse(str(path), reify=True)
     except OSError as err:
@@ -221,10 +325,16 @@ def _svg_elements(svg, se, path: Path, scale: float, geometry: VectorGeometry) -
     for k, element in enumerate(svg.elements()):
         what = f"{path}: SVG element {k} <{type(element).__name__.lower()}>"
         try:
-            if isinstance(element, se.Circle) or (isinstance(element, se.Ellipse) and abs(element.rx - element.ry) < 1e-9 * max(element.rx, 1)):
-                geometry.add_circle(element.cx, element.cy, element.rx, what)
+            round_shape = isinstance(element, se.Circle) or (isinstance(element, se.Ellipse) and abs(element.rx - element.ry) < 1e-9 * max(element.rx, 1))
+            m = element.transform if isinstance(element, se.Shape) else None
+            similar = m is not None and abs(m.a - m.d) <= 1e-9 * (abs(m.a) + abs(m.b)) and abs(m.b + m.c) <= 1e-9 * (abs(m.a) + abs(m.b))
+            mirrored = m is not None and abs(m.a + m.d) <= 1e-9 * (abs(m.a) + abs(m.b)) and abs(m.b - m.c) <= 1e-9 * (abs(m.a) + abs(m.b))
+            if round_shape and (similar or mirrored):  # a circle stays a circle: its centre and radius moved
+                centre = m.point_in_matrix_space((element.cx, element.cy))
+                geometry.add_circle(centre.x, centre.y, element.rx * math.sqrt(abs(m.a * m.d - m.b * m.c)), what)
             elif isinstance(element, se.Shape):
-                for sub in se.Path(element).as_subpaths():
+                # reify leaves a rotation or skew on rects and ellipses: abs() applies it
+                for sub in abs(se.Path(element)).as_subpaths():
                     sub = se.Path(sub)
                     points, closed = [], False
                     for seg in sub:
@@ -260,6 +370,8 @@ def read_geojson(path: Path, scale) -> VectorGeometry:
         raise FloorplanError(f"{path}: not valid JSON ({err})") from None
     except RecursionError:
         raise FloorplanError(f"{path}: nested deeper than the JSON parser can follow (GeoJSON needs a few levels)") from None
+    except ValueError as err:  # an integer of thousands of digits (Python's int-digits limit)
+        raise FloorplanError(f"{path}: not usable JSON ({err})") from None
     if too_deep(data, MAX_NESTING):
         raise FloorplanError(f"{path}: nested deeper than {MAX_NESTING} levels (GeoJSON needs a few)")
     if not isinstance(data, dict) or not isinstance(data.get("type"), str):
@@ -272,6 +384,7 @@ def read_geojson(path: Path, scale) -> VectorGeometry:
             raise FloorplanError(f"{path}: 'features' must be a list of features, got {type(features).__name__}")
     else:
         features = [data if data["type"] == "Feature" else {"geometry": data}]
+    scale = _geojson_crs_scale(data, path, scale)
     geometry = VectorGeometry()
 
     def visit(geom, props, what):
@@ -300,6 +413,7 @@ def read_geojson(path: Path, scale) -> VectorGeometry:
             props = {}
         if not isinstance(props, dict):
             raise FloorplanError(f"{what}: 'properties' must be an object, got {type(props).__name__}")
+        _check_coordinate_types(feature["geometry"], what)
         try:
             with np.errstate(all="ignore"):  # NaN coordinates: refused below, not warned about by shapely
                 geom = shape(feature["geometry"])
@@ -314,6 +428,39 @@ def read_geojson(path: Path, scale) -> VectorGeometry:
         raise FloorplanError(f"{path}: coordinates look like longitude/latitude; a floorplan needs metres (project it to a metric CRS, or pass --scale)")
     geometry.check_reach(path)
     return geometry
+
+
+def _check_coordinate_types(geometry, what: str) -> None:
+    """Every GeoJSON coordinate a JSON number: shapely would read "5" and true as 5.0 and
+    1.0 without a word."""
+    stack = [geometry]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack += [item[k] for k in ("coordinates", "geometries") if k in item]
+        elif isinstance(item, list):
+            for v in item:
+                if isinstance(v, (list, dict)):
+                    stack.append(v)
+                elif real_number(v) is None:
+                    raise FloorplanError(f"{what} has a coordinate {str(v)[:40]!r} that is not a number")
+
+
+_GEOGRAPHIC_CRS = ("crs84", "epsg::4326", "epsg:4326", "epsg::4269", "epsg:4269", "epsg::4258", "epsg:4258")
+
+
+def _geojson_crs_scale(data: dict, path: Path, scale):
+    """The scale to read a GeoJSON with a (2008-style) `crs` member: this reader converts no
+    coordinate system, so one that is not lon/lat (refused) needs --scale to say its unit."""
+    crs = data.get("crs")
+    if crs is None or scale is not None:
+        return scale
+    name = crs.get("properties", {}).get("name") if isinstance(crs, dict) and isinstance(crs.get("properties"), dict) else None
+    label = str(name)[:80] if name is not None else str(crs)[:80]
+    if any(g in label.lower() for g in _GEOGRAPHIC_CRS):
+        raise FloorplanError(f"{path}: crs {label} is longitude/latitude; a floorplan needs metres (project it to a metric CRS)")
+    raise FloorplanError(f"{path}: declares crs {label}, whose unit this reader cannot know (it converts no coordinate system): "
+                         "pass --scale METRES_PER_UNIT (1 for metres, 0.3048 for feet, 0.3048006 for US survey feet)")
 
 
 # --- primitives from the vectors ----------------------------------------------------------------

@@ -1,94 +1,275 @@
-"""Touching collinear wall pieces merged into one segment, in near-linear time: candidate
-pairs come from a k-d tree over the endpoints (cKDTree), groups from union-find over the
-joins (scipy's connected components), and each group is merged in order along its line,
-with the same result as merging pair by pair."""
+"""Touching collinear wall pieces merged into one segment, in near-linear time and memory:
+the merge rule runs in one compiled scan whose partner searches look only at segments
+registered in a spatial hash near the segment at hand, so 10,000 pieces drawn on top of
+each other, 100,000 short lines in a small square or a 200,000-point path cost a scan,
+not a pairwise comparison (nor a k-d tree's millions of pairs).
+
+The hash: every segment is registered in the cells (side `cell`) of sample points every
+cell / 2 along its line, extended by `gap` past either end; a grown segment registers
+the extension. A segment b can join a only with both ends within `offset` of a's line and
+its extent within `gap` of a's, so b's ends lie within offset + cell / 4 of a sample of a
+and of one of b's own: with cell >= 2.5 offset, b is registered in the 3 x 3 cells around
+a sample of a (forward search), and a in the 3 x 3 cells around b's ends (backward)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
+
+from .numba_support import njit
 
 
-def _joins(a: np.ndarray, b: np.ndarray, cos_tol: float, offset: float, gap: float) -> np.ndarray:
-    """(K,) bool, pairwise over broadcast (K, 2, 2) stacks: does segment b join segment a
-    (parallel within the angle, both ends within offset of a's line, extents along it
-    touching up to gap)."""
-    a, b = np.broadcast_arrays(a, b)
-    d = (a[:, 1] - a[:, 0]) / np.linalg.norm(a[:, 1] - a[:, 0], axis=1)[:, None]
-    n = np.stack([-d[:, 1], d[:, 0]], axis=1)
-    db = (b[:, 1] - b[:, 0]) / np.linalg.norm(b[:, 1] - b[:, 0], axis=1)[:, None]
-    rel_b, rel_a = b - a[:, :1], a - a[:, :1]
-    tb = np.einsum("kpi,ki->kp", rel_b, d)  # positions along a's line
-    ta = np.einsum("kpi,ki->kp", rel_a, d)
-    return ((np.abs(np.einsum("ki,ki->k", d, db)) >= cos_tol) & (np.abs(np.einsum("kpi,ki->kp", rel_b, n)).max(axis=1) <= offset)
-            & ~(tb.min(axis=1) > ta.max(axis=1) + gap) & ~(ta.min(axis=1) > tb.max(axis=1) + gap))
+@njit
+def _joins(segs, ia, ib, cos_tol, offset, gap):
+    """Does segment ib join segment ia (parallel within the angle, both ends within offset
+    of ia's line, extents along it touching up to gap)? The arithmetic of the vectorised
+    test this replaces, operation for operation."""
+    ax0, ay0, ax1, ay1 = segs[ia, 0, 0], segs[ia, 0, 1], segs[ia, 1, 0], segs[ia, 1, 1]
+    bx0, by0, bx1, by1 = segs[ib, 0, 0], segs[ib, 0, 1], segs[ib, 1, 0], segs[ib, 1, 1]
+    ex, ey = ax1 - ax0, ay1 - ay0
+    na = math.sqrt(ex * ex + ey * ey)
+    dx, dy = ex / na, ey / na
+    fx, fy = bx1 - bx0, by1 - by0
+    nb = math.sqrt(fx * fx + fy * fy)
+    gx, gy = fx / nb, fy / nb
+    if not abs(dx * gx + dy * gy) >= cos_tol:
+        return False
+    r0x, r0y, r1x, r1y = bx0 - ax0, by0 - ay0, bx1 - ax0, by1 - ay0
+    if not max(abs(r0x * -dy + r0y * dx), abs(r1x * -dy + r1y * dx)) <= offset:
+        return False
+    tb0, tb1 = r0x * dx + r0y * dy, r1x * dx + r1y * dy
+    ta0 = (ax0 - ax0) * dx + (ay0 - ay0) * dy
+    ta1 = ex * dx + ey * dy
+    return not (min(tb0, tb1) > max(ta0, ta1) + gap) and not (min(ta0, ta1) > max(tb0, tb1) + gap)
 
 
-def _joined(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a extended along its own line over b's extent."""
-    d = (a[1] - a[0]) / np.linalg.norm(a[1] - a[0])
-    ta, tb = sorted(((a - a[0]) @ d).tolist()), sorted(((b - a[0]) @ d).tolist())
-    return np.array([a[0] + min(ta[0], tb[0]) * d, a[0] + max(ta[1], tb[1]) * d])
+@njit
+def _join_into(segs, ia, ib):
+    """Segment ia extended along its own line over ib's extent (in place), with the
+    arithmetic of the numpy code this replaces (its norm and products go through BLAS, as
+    np.dot does here: the same roundings); returns ia's old start and direction, its old
+    extent along them and the new one."""
+    a0 = segs[ia, 0].copy()
+    v = segs[ia, 1] - a0
+    d = v / np.sqrt(np.dot(v, v))
+    ta = np.dot(segs[ia] - a0, d)
+    tb = np.dot(segs[ib] - a0, d)
+    old_lo, old_hi = min(ta[0], ta[1]), max(ta[0], ta[1])
+    lo = min(old_lo, min(tb[0], tb[1]))
+    hi = max(old_hi, max(tb[0], tb[1]))
+    segs[ia, 0] = a0 + lo * d
+    segs[ia, 1] = a0 + hi * d
+    return a0[0], a0[1], d[0], d[1], old_lo, old_hi, lo, hi
 
 
-def _merge_in_order(segs: np.ndarray, cos_tol: float, offset: float, gap: float) -> tuple[np.ndarray, np.ndarray]:
-    """The merge rule applied in index order: repeatedly the first segment (lowest index)
-    that joins a later one absorbs the first such one. Each row's later partners are found
-    in one vectorised test; after a merge only the survivor's pairs have changed, so the
-    scan resumes at the earliest row that now joins it instead of at row 0 (the same merges
-    as restarting the scan, without the cubic rescans). Returns the survivors and their rows."""
-    segs = segs.copy()
-    alive = np.ones(len(segs), dtype=bool)
+@njit
+def _bucket(cx, cy, mask):
+    h = (cx * 73856093) ^ (cy * 19349663)
+    return h & mask
+
+
+@njit
+def _register(heads, rows, nexts, count, row, x0, y0, dx, dy, t0, t1, cell, mask, skip_first=False):
+    """Register row in the cells of samples every cell / 2 along x0 + t (dx, dy), t in
+    [t0, t1] (both ends included; with skip_first not in t0's cell, registered before);
+    returns the new entry count and arrays (grown)."""
+    n = max(int(math.ceil(abs(t1 - t0) / (0.5 * cell))), 1)
+    last_cx, last_cy = np.int64(-(2 ** 62)), np.int64(-(2 ** 62))
+    if skip_first:
+        last_cx = np.int64(math.floor((x0 + t0 * dx) / cell))
+        last_cy = np.int64(math.floor((y0 + t0 * dy) / cell))
+    for s in range(n + 1):
+        t = t0 + (t1 - t0) * s / n
+        cx = np.int64(math.floor((x0 + t * dx) / cell))
+        cy = np.int64(math.floor((y0 + t * dy) / cell))
+        if cx == last_cx and cy == last_cy:
+            continue
+        last_cx, last_cy = cx, cy
+        if count == len(rows):
+            rows = np.concatenate((rows, np.empty(len(rows), np.int64)))
+            nexts = np.concatenate((nexts, np.empty(len(nexts), np.int64)))
+        b = _bucket(cx, cy, mask)
+        rows[count] = row
+        nexts[count] = heads[b]
+        heads[b] = count
+        count += 1
+    return count, rows, nexts
+
+
+@njit
+def _gather(heads, rows, nexts, alive, stamp, mark, x, y, cell, mask, out, n_out):
+    """Rows registered in the 3 x 3 cells around (x, y), not yet marked with stamp, into
+    out[n_out:]; entries of dead rows are unlinked on the way (their cells get cheaper)."""
+    cx0 = np.int64(math.floor(x / cell))
+    cy0 = np.int64(math.floor(y / cell))
+    for ox in range(-1, 2):
+        for oy in range(-1, 2):
+            b = _bucket(cx0 + ox, cy0 + oy, mask)
+            prev = -1
+            e = heads[b]
+            while e >= 0:
+                r = rows[e]
+                nxt = nexts[e]
+                if not alive[r]:
+                    if prev < 0:
+                        heads[b] = nxt
+                    else:
+                        nexts[prev] = nxt
+                    e = nxt
+                    continue
+                if stamp[r] != mark:
+                    stamp[r] = mark
+                    if n_out == len(out):
+                        out = np.concatenate((out, np.empty(len(out), np.int64)))
+                    out[n_out] = r
+                    n_out += 1
+                prev = e
+                e = nxt
+    return out, n_out
+
+
+@njit
+def _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, t0, t1, cell, mask, out, n_out, skip_first=False):
+    """_gather around samples every cell / 2 along x0 + t (dx, dy), t in [t0, t1], once per
+    cell (with skip_first not around t0's cell, gathered before)."""
+    n = max(int(math.ceil(abs(t1 - t0) / (0.5 * cell))), 1)
+    last_cx, last_cy = np.int64(-(2 ** 62)), np.int64(-(2 ** 62))
+    for s in range(n + 1):
+        t = t0 + (t1 - t0) * s / n
+        x, y = x0 + t * dx, y0 + t * dy
+        cx, cy = np.int64(math.floor(x / cell)), np.int64(math.floor(y / cell))
+        if s == 0 and skip_first:
+            last_cx, last_cy = cx, cy
+            continue
+        if cx == last_cx and cy == last_cy:
+            continue
+        last_cx, last_cy = cx, cy
+        out, n_out = _gather(heads, rows, nexts, alive, stamp, mark, x, y, cell, mask, out, n_out)
+    return out, n_out
+
+
+@njit
+def _direction(segs, i):
+    ex, ey = segs[i, 1, 0] - segs[i, 0, 0], segs[i, 1, 1] - segs[i, 0, 1]
+    length = math.sqrt(ex * ex + ey * ey)
+    return ex / length, ey / length, length
+
+
+@njit
+def _merge_scan(segs, cos_tol, offset, gap, cell):
+    """The merge rule in index order (see merge_collinear): returns the alive mask; segs
+    is merged in place."""
+    n = len(segs)
+    size = 1
+    while size < 4 * n:
+        size *= 2
+    mask = np.int64(size - 1)
+    heads = np.full(size, -1, np.int64)
+    rows = np.empty(16 * n + 16, np.int64)
+    nexts = np.empty(16 * n + 16, np.int64)
+    count = 0
+    margin = gap + 0.5 * cell  # past either end: the reach of a join, and rounding
+    for r in range(n):
+        dx, dy, length = _direction(segs, r)
+        count, rows, nexts = _register(heads, rows, nexts, count, r, segs[r, 0, 0], segs[r, 0, 1], dx, dy,
+                                       -margin, length + margin, cell, mask)
+    # rows the scan has passed (the only ones a backward search can find), registered as
+    # the scan leaves them: a backward search does not wade through the rows ahead
+    heads_back = np.full(size, -1, np.int64)
+    rows_back = np.empty(16 * n + 16, np.int64)
+    nexts_back = np.empty(16 * n + 16, np.int64)
+    count_back = 0
+    alive = np.ones(n, np.bool_)
+    stamp = np.full(n, -1, np.int64)  # forward candidates of row i: gathered once each
+    stamp_back = np.full(n, -1, np.int64)
+    mark = 0
+    mark_back = 0
+    cand = np.empty(64, np.int64)
+    back = np.empty(64, np.int64)
     i = 0
-    while i < len(segs):
+    fresh = True  # cand must be gathered anew for row i
+    n_cand = 0
+    start = 0
+    while i < n:
         if not alive[i]:
             i += 1
+            fresh = True
             continue
-        later = np.flatnonzero(alive[i + 1:]) + i + 1
-        hit = later[_joins(segs[i:i + 1], segs[later], cos_tol, offset, gap)] if len(later) else later
-        if not len(hit):
-            i += 1
-            continue
-        segs[i] = _joined(segs[i], segs[hit[0]])
-        alive[hit[0]] = False
-        while True:  # an earlier row (which joined nothing before) may join the grown one now
-            earlier = np.flatnonzero(alive[:i])
-            back = earlier[_joins(segs[earlier], segs[i:i + 1], cos_tol, offset, gap)] if len(earlier) else earlier
-            if not len(back):
+        if fresh:
+            mark += 1
+            stamp[i] = mark
+            dx, dy, length = _direction(segs, i)
+            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, segs[i, 0, 0], segs[i, 0, 1], dx, dy,
+                                         -margin, length + margin, cell, mask, cand, 0)
+            cand[:n_cand] = np.sort(cand[:n_cand])
+            start = 0
+            fresh = False
+        hit = -1
+        while start < n_cand and not alive[cand[start]]:  # dead rows stay dead
+            start += 1
+        for k in range(start, n_cand):  # the first later row that joins i
+            j = cand[k]
+            if j > i and alive[j] and _joins(segs, i, j, cos_tol, offset, gap):
+                hit = j
                 break
-            segs[back[0]] = _joined(segs[back[0]], segs[i])
+        if hit < 0:  # row i is done (until an absorption moves the scan back to it)
+            dx, dy, length = _direction(segs, i)
+            count_back, rows_back, nexts_back = _register(heads_back, rows_back, nexts_back, count_back, i, segs[i, 0, 0], segs[i, 0, 1],
+                                                          dx, dy, -margin, length + margin, cell, mask)
+            i += 1
+            fresh = True
+            continue
+        before_join = segs[i].copy()
+        x0, y0, dx, dy, old_lo, old_hi, lo, hi = _join_into(segs, i, hit)
+        alive[hit] = False
+        # whether an earlier row joins i depends on i's ends only: unchanged (a piece inside
+        # i's extent), nothing earlier can join it now
+        moved = (segs[i, 0, 0] != before_join[0, 0] or segs[i, 0, 1] != before_join[0, 1]
+                 or segs[i, 1, 0] != before_join[1, 0] or segs[i, 1, 1] != before_join[1, 1])
+        # the grown part: registered, and its neighbours become candidates of i
+        before = n_cand
+        if lo < old_lo:  # walked from the old end outward: its cell was registered and gathered
+            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_lo - margin, lo - margin, cell, mask, True)
+            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, old_lo - margin, lo - margin, cell, mask, cand, n_cand, True)
+        if hi > old_hi:
+            count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask, True)
+            cand, n_cand = _gather_along(heads, rows, nexts, alive, stamp, mark, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask, cand, n_cand, True)
+        if n_cand > before:  # keep the live later rows, in order
+            keep = 0
+            for k in range(n_cand):
+                if cand[k] > i and alive[cand[k]]:
+                    cand[keep] = cand[k]
+                    keep += 1
+            n_cand = keep
+            cand[:n_cand] = np.sort(cand[:n_cand])
+            start = 0
+        while moved and i > 0:  # an earlier row (which joined nothing before) may join the grown one now
+            mark_back += 1
+            n_back = 0
+            for p in range(2):
+                back, n_back = _gather(heads_back, rows_back, nexts_back, alive, stamp_back, mark_back, segs[i, p, 0], segs[i, p, 1], cell, mask, back, n_back)
+            first = -1
+            if n_back:
+                back[:n_back] = np.sort(back[:n_back])
+                for k in range(n_back):
+                    j = back[k]
+                    if j >= i:
+                        break
+                    if _joins(segs, j, i, cos_tol, offset, gap):
+                        first = j
+                        break
+            if first < 0:
+                break
+            x0, y0, dx, dy, old_lo, old_hi, lo, hi = _join_into(segs, first, i)
             alive[i] = False
-            i = int(back[0])
-    return segs[alive], np.flatnonzero(alive)
-
-
-def _collinear_groups(segs: np.ndarray, angle_deg: float, offset: float, gap: float) -> np.ndarray:
-    """Component label per segment: segments near each other and nearly parallel. A chain of
-    merges keeps every member within offset of the first one's line and within angle_deg of
-    its direction, and a grown segment reaches at most gap past a member's extent, so two
-    segments that can end up in one merged line lie within `reach` of each other and within
-    twice the angle: components of that (loose) graph never split a merge."""
-    lengths = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
-    reach = math.hypot(gap, offset) + gap + 2 * offset
-    spacing = max(reach, 1e-6 * float(lengths.max()))
-    # points every `spacing` along each segment (ends included): two segments within reach
-    # have sample points within reach + spacing of each other
-    count = np.ceil(lengths / spacing).astype(np.int64) + 1
-    owner = np.repeat(np.arange(len(segs)), count)
-    frac = (np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)) / np.repeat(count - 1, count)
-    points = segs[owner, 0] + frac[:, None] * (segs[owner, 1] - segs[owner, 0])
-    pairs = cKDTree(points).query_pairs(reach + spacing, output_type="ndarray")
-    i, j = owner[pairs[:, 0]], owner[pairs[:, 1]]
-    keep = i != j
-    i, j = i[keep], j[keep]
-    d = (segs[:, 1] - segs[:, 0]) / lengths[:, None]
-    near = np.abs(np.einsum("ij,ij->i", d[i], d[j])) >= math.cos(math.radians(min(2 * angle_deg, 90.0)))
-    graph = coo_matrix((np.ones(int(near.sum()), dtype=np.int8), (i[near], j[near])), shape=(len(segs), len(segs)))
-    return connected_components(graph, directed=False)[1]
+            i = first
+            if lo < old_lo:
+                count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, lo - margin, old_lo - margin, cell, mask)
+            if hi > old_hi:
+                count, rows, nexts = _register(heads, rows, nexts, count, i, x0, y0, dx, dy, old_hi + margin, hi + margin, cell, mask)
+            fresh = True
+    return alive
 
 
 def merge_collinear(segments: np.ndarray, angle_deg: float, offset: float, gap: float) -> np.ndarray:
@@ -97,26 +278,17 @@ def merge_collinear(segments: np.ndarray, angle_deg: float, offset: float, gap: 
 
     Rule: in index order, the first segment that joins a later one (parallel within
     angle_deg, both ends within offset of its line, extents up to gap apart) absorbs it,
-    extended along its own line; until nothing joins. Near-linear in the number of
-    segments: only segments of one group (near each other and nearly parallel, found with
-    a k-d tree) can merge, and the rule runs inside each group. Survivors keep the order
-    of their first member."""
-    segs = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
-    segs = segs[np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) > 1e-9]
+    extended along its own line; then the first earlier segment that joins the grown one
+    absorbs it, and so on; until nothing joins. Survivors keep their (first member's)
+    order. Near-linear in the number of segments for drawings of walls (see the module)."""
+    segs = np.ascontiguousarray(np.asarray(segments, dtype=float).reshape(-1, 2, 2))
+    segs = segs[np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) > 1e-9].copy()
     if len(segs) < 2:
-        return segs.copy()
+        return segs
     cos_tol = math.cos(math.radians(angle_deg))
-    label = _collinear_groups(segs, angle_deg, offset, gap)
-    order = np.argsort(label, kind="stable")  # each group's members in index order
-    bounds = np.flatnonzero(np.diff(label[order])) + 1
-    out, first = [], []
-    for members in np.split(order, bounds):
-        if len(members) == 1:
-            out.append(segs[members])
-            first.append(members[:1])
-            continue
-        merged, rows = _merge_in_order(segs[members], cos_tol, offset, gap)
-        out.append(merged)
-        first.append(members[rows])  # a survivor keeps its first member's place
-    rows = np.concatenate(first)
-    return np.concatenate(out)[np.argsort(rows, kind="stable")].reshape(-1, 2, 2)
+    # cells no finer than 2.5 offset (the hash's guarantee) and coarse enough that the
+    # samples along all segments stay ~10 per segment whatever their lengths
+    lengths = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
+    cell = max(2.5 * offset, float(lengths.sum() + 2 * gap * len(segs)) / (5.0 * len(segs)), 1e-9)
+    alive = _merge_scan(segs, cos_tol, float(offset), float(gap), cell)
+    return segs[alive]

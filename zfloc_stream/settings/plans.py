@@ -28,3 +28,8 @@ class VectorFloorplanSettings(Section):
     solid_max_width: float = Field(0.6, ge=0, le=100)  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
     margin: float = Field(1.0, ge=0, le=1000)  # m of free border around the drawing
     max_cells: int = Field(25_000_000, ge=1, le=1_000_000_000)  # larger rasters are refused (a wrong unit scale, usually)
+    # Drawn entities a plan may expand to, counted before anything is expanded: DXF
+    # entities with every block reference (INSERT) counted as its block's expansion, SVG
+    # elements with every <use> counted as what it references (a few nested blocks of 10
+    # references each are 1e6 or 1e8 entities: a bomb, not a floor).
+    max_entities: int = Field(1_000_000, ge=1, le=1_000_000_000)
