@@ -100,12 +100,12 @@ def pose_stamped(ns: int, x: float, y: float, theta: float) -> dict:
 
 def covariance_6x6(cov) -> list[float]:
     """The 36 row-major entries over (x, y, z, roll, pitch, yaw) of a planar (x, y, theta)
-    covariance; unobserved axes (and all three where the estimate has none or a non-finite
-    one) get UNOBSERVED_VARIANCE."""
+    covariance, made exactly symmetric (the estimate's is up to rounding); unobserved axes
+    (and all three where the estimate has none or a non-finite one) get UNOBSERVED_VARIANCE."""
     out = np.diag(np.full(6, UNOBSERVED_VARIANCE))
     c = None if cov is None else np.asarray(cov, dtype=float)
     if c is not None and c.shape == (3, 3) and np.isfinite(c).all():
-        out[np.ix_(COVARIANCE_AXES, COVARIANCE_AXES)] = c
+        out[np.ix_(COVARIANCE_AXES, COVARIANCE_AXES)] = 0.5 * (c + c.T)
     return out.ravel().tolist()
 
 
