@@ -237,3 +237,19 @@ def test_an_older_log_named_floorplan_replays_identically_and_rewrites_as_map(tm
     frames, edges = _frame_ids(tmp_path / "new.mcap")
     assert frames[S.TOPIC_POSE] == frames[S.TOPIC_GROUND_TRUTH] == frames[S.TOPIC_HYPOTHESES] == {"map"}
     assert ("map", "odom") in edges and ("base_link", "laser") in edges
+
+
+def test_covariance_without_an_estimate_and_unknown_masks_that_do_not_fit():
+    from zfloc_stream.errors import FloorplanError
+    from zfloc_stream.floorplan import Floorplan
+    from zfloc_stream.ros2_output import covariance_6x6
+
+    for cov in (None, np.full((3, 3), np.nan)):  # no covariance: every axis unknown, none certain
+        np.testing.assert_array_equal(np.reshape(covariance_6x6(cov), (6, 6)), np.eye(6) * UNOBSERVED_VARIANCE)
+    occ = np.zeros((20, 20), dtype=bool)
+    occ[5, :] = True
+    with pytest.raises(FloorplanError, match=r"unknown-cell mask has shape \(3, 3\), the grid \(20, 20\)"):
+        Floorplan(occ, 0.1, (0.0, 0.0), unknown=np.ones((3, 3), dtype=bool))
+    plan = Floorplan(occ, 0.1, (0.0, 0.0), unknown=np.ones((20, 20), dtype=bool))
+    assert not (plan.unknown & plan.occupied).any() and plan.unknown.sum() == 380  # a wall is never unknown
+    assert Floorplan(occ, 0.1, (0.0, 0.0), unknown=np.zeros((20, 20), dtype=bool)).unknown is None
