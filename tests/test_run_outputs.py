@@ -115,8 +115,9 @@ def test_ros2_messages_and_tum_read_by_evo_agree_with_our_error_figures(laser, t
     assert (grid.info.width, grid.info.height) == scene.floorplan.occupied.shape[::-1]
     assert np.array_equal(np.array(grid.data).reshape(grid.info.height, grid.info.width) == 100, scene.floorplan.occupied)
     assert len(msgs["/tf"]) == len(msgs["/zfloc/pose"]) == ours["posed"]
-    tf = msgs["/tf"][-1].transforms[0]
-    assert (tf.header.frame_id, tf.child_frame_id) == ("map", "odom")
+    assert len(msgs["/zfloc/pose"][-1].pose.covariance) == 36  # PoseWithCovarianceStamped, as AMCL: evo reads it too
+    tf = msgs["/tf"][-1].transforms
+    assert [(t.header.frame_id, t.child_frame_id) for t in tf] == [("map", "odom"), ("odom", "base_link")]
 
 
 def _foxglove_client(url, received, ready, done):

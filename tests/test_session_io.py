@@ -114,10 +114,10 @@ def test_settings_and_floorplan_travel_inside(tmp_path):
     # the floorplan was built with the defaults, not the run's settings: rebuilt the same way
     assert np.array_equal(back.origin, plan.origin) and back.settings == plan.settings == session.floorplan_settings
     assert session.load_floorplan(settings).settings == settings
-    # and it is drawn for Foxglove once, as a Grid in the floorplan frame
+    # and it is drawn for Foxglove once, as a Grid in the map frame (REP 105; logs before it said `floorplan`)
     with open(tmp_path / "s.mcap", "rb") as f:
         grids = [d for _s, _c, _m, d in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=[S.TOPIC_FLOORPLAN])]
-    assert len(grids) == 1 and grids[0].frame_id == "floorplan" and grids[0].column_count == 60
+    assert len(grids) == 1 and grids[0].frame_id == "map" and grids[0].column_count == 60
     assert np.array_equal(np.frombuffer(grids[0].data, np.uint8).reshape(40, 60) == 100, occ)
 
 

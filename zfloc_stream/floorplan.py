@@ -111,7 +111,11 @@ def blob_spans(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Floorplan:
     """Walls of one building in metres; build with from_occupancy / load / from_gibson_map."""
 
-    def __init__(self, occupied, resolution: float, origin, settings: Settings | None = None, name: str = ""):
+    def __init__(self, occupied, resolution: float, origin, settings: Settings | None = None, name: str = "",
+                 unknown=None):
+        """unknown: optional bool grid of the cells the source marks neither wall nor free
+        (a ROS map's grey, between free_thresh and occupied_thresh); only written back out
+        (write_ros, the ROS 2 OccupancyGrid's -1), never read by the estimator."""
         occ = np.asarray(occupied)
         if occ.ndim != 2 or occ.shape[0] < 2 or occ.shape[1] < 2:
             raise FloorplanError(f"floorplan {name!r}: occupancy must be a 2D grid of at least 2x2 cells, got shape {occ.shape}")
@@ -125,6 +129,14 @@ class Floorplan:
             raise FloorplanError(f"floorplan {name!r}: the plan reaches {np.abs(extent).max():.3g} m from 0: not a place on Earth")
         self.occupied = occ.astype(bool)
         self.occupied.setflags(write=False)
+        self.unknown = None  # None: every non-wall cell is free
+        if unknown is not None:
+            unk = np.asarray(unknown, dtype=bool)
+            if unk.shape != occ.shape:
+                raise FloorplanError(f"floorplan {name!r}: unknown-cell mask has shape {unk.shape}, the grid {occ.shape}")
+            if (unk & ~self.occupied).any():
+                self.unknown = unk & ~self.occupied
+                self.unknown.setflags(write=False)
         if not self.occupied.any():
             raise FloorplanError(f"floorplan {name!r} has no wall cells (nothing is occupied)")
         if self.occupied.all():
@@ -232,9 +244,10 @@ class Floorplan:
         # occupancy probability of each grey level (map_server's rule), looked up per pixel:
         # the same test as on a float image, without ~200 MB of floats for a large map
         level = np.arange(256, dtype=float)
-        occupied_level = (level / 255.0 if negate else (255.0 - level) / 255.0) > occ_thresh
-        occ = occupied_level[img][::-1]  # image row 0 = largest y
-        return built_naming_file(path, cls, occ, resolution, origin, settings, path.stem)
+        p = level / 255.0 if negate else (255.0 - level) / 255.0
+        occ = (p > occ_thresh)[img][::-1]  # image row 0 = largest y
+        unknown = ~(p < free_thresh)[img][::-1] & ~occ  # map_server's trinary: neither free nor occupied
+        return built_naming_file(path, cls, occ, resolution, origin, settings, path.stem, unknown)
 
     @classmethod
     def from_gibson_map(cls, path, settings: Settings | None = None) -> Floorplan:
@@ -249,10 +262,13 @@ class Floorplan:
         return cls(occ, GIBSON_RESOLUTION, origin, cfg, path.parent.name or path.stem)
 
     def write_ros(self, directory, name: str = "map") -> Path:
-        """Write name.yaml + name.png (map_server convention); returns the YAML path."""
+        """Write name.yaml + name.png (map_server convention: 0 wall, 254 free, 205 unknown);
+        returns the YAML path."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         img = np.where(self.occupied[::-1], 0, 254).astype(np.uint8)
+        if self.unknown is not None:
+            img[self.unknown[::-1]] = 205  # p = 0.196: above free_thresh 0.196, below occupied_thresh
         png = directory / f"{name}.png"
         if not cv2.imwrite(str(png), img):
             raise FloorplanError(f"cannot write floorplan image {png}")

@@ -2,29 +2,36 @@
 profile and CDR messages, written by mcap-ros2-support, which ROS 2 tools (ros2 bag, RViz
 through a player, Foxglove) and evo (`evo_ape bag2 ...`, through rosbags) read.
 
-Topics (frame ids: `map` = the floorplan, `odom` = the odometry plane):
-- /zfloc/pose          geometry_msgs/PoseStamped in `map`, one per frame with a pose
+Topics (frames: frame_tree.py, REP 105 `map`, `odom`, `base_link`, as in session.mcap):
+- /zfloc/pose          geometry_msgs/PoseWithCovarianceStamped in `map` (as AMCL's
+                       /amcl_pose), one per frame with a pose
 - /zfloc/groundtruth   geometry_msgs/PoseStamped in `map`, where the frame's truth is known
-- /tf                  tf2_msgs/TFMessage `map -> odom`, like a ROS localizer publishes it
-- /zfloc/floorplan     nav_msgs/OccupancyGrid in `map`, once, with the first frame
+- /tf                  tf2_msgs/TFMessage `map -> odom` (the localization correction) and
+                       `odom -> base_link` (the odometry), with each pose
+- /zfloc/floorplan     nav_msgs/OccupancyGrid in `map`, once, with the first frame: 100
+                       wall, 0 free, -1 unknown (map_server's values)
 
-The alignment the localizer estimates is a similarity (it may scale odometry); a tf is
-rigid, so `map -> odom` is the rigid transform that puts this frame's odometry-plane pose
-on its estimated pose (what AMCL publishes): exact at each frame's stamp. Stamps are the
-trajectory.tum ones (a repeated input stamp moved 1 us on), so evo pairs the topics with
-the TUM files and with each other.
+The covariance is 6x6 row-major over (x, y, z, roll, pitch, yaw): the estimate's (x, y,
+yaw) block where it is known; z, roll and pitch are not estimated and get
+UNOBSERVED_VARIANCE (as robot_localization reads an axis it should not fuse; AMCL leaves
+them 0, which a filter would take as certainty).
+
+The alignment is a similarity and a tf is rigid: `map -> odom` is exact at each frame's
+stamp (frame_tree.py says how a non-unit scale is handled). Stamps are the trajectory.tum
+ones (a repeated input stamp moved 1 us on), so evo pairs the topics with the TUM files
+and with each other.
 
 The message definitions are the ROS 2 Humble ones (ros2msg text with dependencies).
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
+from .frame_tree import BASE_LINK, MAP, ODOM, map_to_odom, odom_to_base, yaw_quaternion
 
 SEP = "=" * 80 + "\n"
 TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
@@ -41,11 +48,15 @@ def msgdef(main: str, *deps: str) -> str:
 
 
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_WITH_COVARIANCE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 
 MSGDEFS = {
     POSE_STAMPED: msgdef("std_msgs/Header header\ngeometry_msgs/Pose pose\n", HEADER, TIME, POSE, POINT, QUATERNION),
+    POSE_WITH_COVARIANCE: msgdef(
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n", HEADER, TIME,
+        "MSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n", POSE, POINT, QUATERNION),
     TF_MESSAGE: msgdef(
         "geometry_msgs/TransformStamped[] transforms\n",
         "MSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\nstring child_frame_id\n"
@@ -62,7 +73,9 @@ TOPIC_POSE = "/zfloc/pose"
 TOPIC_TRUTH = "/zfloc/groundtruth"
 TOPIC_TF = "/tf"
 TOPIC_FLOORPLAN = "/zfloc/floorplan"
-FRAME_MAP, FRAME_ODOM = "map", "odom"
+UNOBSERVED_VARIANCE = 1e6  # m^2 / rad^2 of the axes a planar localizer does not estimate
+COVARIANCE_AXES = (0, 1, 5)  # x, y, yaw among (x, y, z, roll, pitch, yaw)
+FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # OccupancyGrid cell values
 
 
 def _stamp(ns: int) -> dict:
@@ -74,42 +87,60 @@ def _header(ns: int, frame_id: str) -> dict:
 
 
 def _yaw_quaternion(theta: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(0.5 * theta), "w": math.cos(0.5 * theta)}
+    return dict(zip("xyzw", yaw_quaternion(float(theta)), strict=True))
+
+
+def _pose(x: float, y: float, theta: float) -> dict:
+    return {"position": {"x": float(x), "y": float(y), "z": 0.0}, "orientation": _yaw_quaternion(theta)}
 
 
 def pose_stamped(ns: int, x: float, y: float, theta: float) -> dict:
-    return {"header": _header(ns, FRAME_MAP),
-            "pose": {"position": {"x": float(x), "y": float(y), "z": 0.0}, "orientation": _yaw_quaternion(float(theta))}}
+    return {"header": _header(ns, MAP), "pose": _pose(x, y, theta)}
 
 
-def map_to_odom(pose, alignment) -> tuple[float, float, float]:
-    """(x, y, yaw) of the rigid `map -> odom` transform that maps this frame's odometry-plane
-    pose (the alignment's inverse applied to the estimate) onto the estimated pose."""
-    x, y, theta = (float(v) for v in pose)
-    qx, qy, qth = alignment.inverse().apply_pose(x, y, theta)
-    yaw = theta - qth
-    c, s = math.cos(yaw), math.sin(yaw)
-    return x - (c * qx - s * qy), y - (s * qx + c * qy), yaw
+def covariance_6x6(cov) -> list[float]:
+    """The 36 row-major entries over (x, y, z, roll, pitch, yaw) of a planar (x, y, theta)
+    covariance, made exactly symmetric (the estimate's is up to rounding); unobserved axes
+    (and all three where the estimate has none or a non-finite one) get UNOBSERVED_VARIANCE."""
+    out = np.diag(np.full(6, UNOBSERVED_VARIANCE))
+    c = None if cov is None else np.asarray(cov, dtype=float)
+    if c is not None and c.shape == (3, 3) and np.isfinite(c).all():
+        out[np.ix_(COVARIANCE_AXES, COVARIANCE_AXES)] = 0.5 * (c + c.T)
+    return out.ravel().tolist()
 
 
-def tf_message(ns: int, x: float, y: float, yaw: float) -> dict:
-    return {"transforms": [{
-        "header": _header(ns, FRAME_MAP), "child_frame_id": FRAME_ODOM,
-        "transform": {"translation": {"x": x, "y": y, "z": 0.0}, "rotation": _yaw_quaternion(yaw)},
-    }]}
+def pose_with_covariance(ns: int, pose, cov) -> dict:
+    return {"header": _header(ns, MAP), "pose": {"pose": _pose(*pose), "covariance": covariance_6x6(cov)}}
+
+
+def _transform(ns: int, parent: str, child: str, x: float, y: float, yaw: float) -> dict:
+    return {"header": _header(ns, parent), "child_frame_id": child,
+            "transform": {"translation": {"x": float(x), "y": float(y), "z": 0.0}, "rotation": _yaw_quaternion(yaw)}}
+
+
+def tf_message(ns: int, pose, alignment) -> dict:
+    """map -> odom (the correction) and odom -> base_link (the odometry-plane pose): their
+    product is the estimated pose at this stamp."""
+    return {"transforms": [_transform(ns, MAP, ODOM, *map_to_odom(pose, alignment)),
+                           _transform(ns, ODOM, BASE_LINK, *odom_to_base(pose, alignment))]}
 
 
 def occupancy_grid(ns: int, floorplan) -> dict:
-    """The floorplan's walls (100) and the rest (0); row 0 of the grid is its lowest y, as
-    OccupancyGrid wants (origin = the lower-left corner of cell (0, 0))."""
+    """The floorplan's walls (100), free cells (0) and the cells its map marks unknown (-1,
+    map_server's grey); row 0 of the grid is its lowest y, as OccupancyGrid wants (origin =
+    the lower-left corner of cell (0, 0))."""
     occupied = np.asarray(floorplan.occupied, dtype=bool)
+    values = np.where(occupied, OCCUPIED, FREE).astype(np.int8)
+    unknown = getattr(floorplan, "unknown", None)
+    if unknown is not None:
+        values[np.asarray(unknown, dtype=bool) & ~occupied] = UNKNOWN
     h, w = occupied.shape
     x0, y0 = (float(v) for v in floorplan.origin)
     return {
-        "header": _header(ns, FRAME_MAP),
+        "header": _header(ns, MAP),
         "info": {"map_load_time": _stamp(ns), "resolution": float(floorplan.resolution), "width": int(w), "height": int(h),
                  "origin": {"position": {"x": x0, "y": y0, "z": 0.0}, "orientation": _yaw_quaternion(0.0)}},
-        "data": np.where(occupied, 100, 0).astype(np.int8).ravel().tolist(),
+        "data": values.ravel().tolist(),
     }
 
 
@@ -139,10 +170,10 @@ class Ros2Writer:
             self._floorplan = None
         pose = estimate.pose
         if pose is not None and np.isfinite(pose).all():
-            self._put(TOPIC_POSE, POSE_STAMPED, pose_stamped(ns, *pose), ns)
+            self._put(TOPIC_POSE, POSE_WITH_COVARIANCE, pose_with_covariance(ns, pose, estimate.covariance), ns)
             self.poses += 1
             if estimate.alignment is not None:
-                self._put(TOPIC_TF, TF_MESSAGE, tf_message(ns, *map_to_odom(pose, estimate.alignment)), ns)
+                self._put(TOPIC_TF, TF_MESSAGE, tf_message(ns, pose, estimate.alignment), ns)
         if truth is not None and np.isfinite(truth).all():
             self._put(TOPIC_TRUTH, POSE_STAMPED, pose_stamped(ns, *truth), ns)
 

@@ -24,6 +24,7 @@ import numpy as np
 from ..config import Settings, load_settings
 from ..errors import SessionLogError
 from ..estimate import Estimate
+from ..frame_tree import LEGACY_MAP
 from . import schemas as S
 from .compare import EXACT, Comparison, Deviation, Divergence, Tolerance, comparable_grid, comparable_status
 from .reader import FrameRecord, LoggedOutputs, Session
@@ -67,17 +68,27 @@ def replay_settings(session: Session, config: str | Path | None = None, override
 
 
 # --- comparison -----------------------------------------------------------------------------
+def logged_map_frame(logged: LoggedOutputs) -> str:
+    """The map frame's name as the log spells it: logs from before REP 105 naming say
+    `floorplan` (frame_tree.LEGACY_MAP), and their replay is compared under that name."""
+    for msg in (logged.pose, logged.hypotheses):
+        if msg is not None and msg.frame_id == LEGACY_MAP:
+            return LEGACY_MAP
+    return S.FRAME_MAP
+
+
 def compare_outputs(comparison: Comparison, index: int, ns: int, logged: LoggedOutputs, est: Estimate, bev_source) -> Divergence | None:
     """The first difference between what was logged for a frame and the re-run (see
     compare.py: decisions exactly, numbers within comparison.tolerance)."""
     pairs: list[tuple[str, object, object]] = [(S.TOPIC_STATUS, comparable_status(logged.status), comparable_status(S.status_to_json(est)))]
-    replay_pose = None if est.pose is None else S.estimate_pose_to_msg(est, ns)
+    frame = logged_map_frame(logged)
+    replay_pose = None if est.pose is None else S.estimate_pose_to_msg(est, ns, frame)
     if (logged.pose is None) != (replay_pose is None):
         return Divergence(index, S.TOPIC_POSE, "present", logged.pose is not None, replay_pose is not None)
     if replay_pose is not None:
         pairs.append((S.TOPIC_POSE, logged.pose, replay_pose))
     if logged.hypotheses is not None:
-        pairs.append((S.TOPIC_HYPOTHESES, logged.hypotheses, S.hypotheses_to_msg(est, ns)))
+        pairs.append((S.TOPIC_HYPOTHESES, logged.hypotheses, S.hypotheses_to_msg(est, ns, frame)))
     if logged.bev is not None:
         grid = bev_grid_of(bev_source)
         if grid is None:

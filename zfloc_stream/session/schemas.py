@@ -31,6 +31,7 @@ from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from .. import frame_tree
 from ..errors import SessionLogError
 # image rows, depth encodings and quaternions: shared with the ROS 2 bag reader (datasets/ros2.py)
 from ..messages import DEPTH_ENCODINGS, depth_from_msg, image_rows, matrix_from_quaternion, quaternion_from_matrix  # noqa: F401
@@ -50,13 +51,15 @@ TOPIC_HYPOTHESES = "/zfloc/hypotheses"
 TOPIC_BEV = "/zfloc/bev"
 TOPIC_STATUS = "/zfloc/status"
 TOPIC_FLOORPLAN = "/zfloc/floorplan"  # Grid, once, for display (the attachment is the source of truth)
+TOPIC_TF = "/tf"  # FrameTransforms map -> odom -> base_link -> sensor with each pose (display; not read back)
 INPUT_TOPICS = (TOPIC_CALIBRATION, TOPIC_IMAGE, TOPIC_DEPTH, TOPIC_LABELS, TOPIC_SCAN, TOPIC_ODOMETRY, TOPIC_GROUND_TRUTH)
 OUTPUT_TOPICS = (TOPIC_POSE, TOPIC_HYPOTHESES, TOPIC_BEV, TOPIC_STATUS)
 
-FRAME_ODOM = "odom"
-FRAME_FLOORPLAN = "floorplan"
-FRAME_CAMERA = "camera"
-FRAME_LASER = "laser"
+# REP 105 names (frame_tree.py); logs before them named the map frame `floorplan` (LEGACY_MAP)
+FRAME_ODOM = frame_tree.ODOM
+FRAME_FLOORPLAN = FRAME_MAP = frame_tree.MAP
+FRAME_CAMERA = frame_tree.CAMERA
+FRAME_LASER = frame_tree.LASER
 
 HEADING_AXIS_KEY = "heading_axis"  # channel metadata: which sensor axis is the heading
 RANGE_MIN_KEY = "range_min"  # /scan channel metadata (foxglove.LaserScan has no such field)
@@ -446,12 +449,12 @@ def estimate_from_status(status: dict) -> Estimate:
         raise SessionLogError(f"status JSON is malformed ({type(err).__name__}: {err})") from None
 
 
-def hypotheses_to_msg(est: Estimate, ns: int) -> PosesInFrame:
-    msg = PosesInFrame(timestamp=to_stamp(ns), frame_id=FRAME_FLOORPLAN)
+def hypotheses_to_msg(est: Estimate, ns: int, frame_id: str = FRAME_MAP) -> PosesInFrame:
+    msg = PosesInFrame(timestamp=to_stamp(ns), frame_id=frame_id)
     for alt in est.alternatives:
         msg.poses.append(planar_pose_to_pose(alt.pose, "x"))
     return msg
 
 
-def estimate_pose_to_msg(est: Estimate, ns: int) -> PoseInFrame:
-    return PoseInFrame(timestamp=to_stamp(ns), frame_id=FRAME_FLOORPLAN, pose=planar_pose_to_pose(est.pose, "x"))
+def estimate_pose_to_msg(est: Estimate, ns: int, frame_id: str = FRAME_MAP) -> PoseInFrame:
+    return PoseInFrame(timestamp=to_stamp(ns), frame_id=frame_id, pose=planar_pose_to_pose(est.pose, "x"))

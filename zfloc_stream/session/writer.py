@@ -33,11 +33,13 @@ from .. import __version__
 from ..config import Settings, dump_settings
 from ..errors import SessionLogError
 from ..estimate import Estimate
+from ..frame_tree import LEGACY_MAP
 from ..frames import CameraFrame, LaserFrame
 from . import environment
 from . import schemas as S
 from .assemble import laser_frame_from_msgs
 from .sink import Record, RecordSink
+from .transforms import frame_transforms_msg
 
 _OUR_CLASSES = {c.DESCRIPTOR.full_name: c for c in (S.RawImage, S.CompressedImage, S.CameraCalibration, S.LaserScan, S.PoseInFrame)}
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -108,6 +110,7 @@ class SessionWriter:
         self._closed = False
         self._failed = False  # a write failed (reported once); close() only releases the file
         self.frames_written = 0
+        self._sensor: tuple[str, str, np.ndarray] | None = None  # (frame id, heading axis, T_odom_sensor) of the last frame, for /tf
         try:
             self._start(settings, floorplan, metadata)
         except OSError as err:
@@ -170,8 +173,15 @@ class SessionWriter:
             logged = self._write_camera(index, frame, ns)
         else:
             logged = self._write_laser(index, frame, ns)
+        self._note_sensor(logged)
         self._end_frame(logged.timestamp, ns)
         return logged
+
+    def _note_sensor(self, frame) -> None:
+        if isinstance(frame, CameraFrame):
+            self._sensor = (S.FRAME_CAMERA, "z", frame.T_odom_cam)
+        else:
+            self._sensor = (S.FRAME_LASER, "x", frame.T_odom_sensor)
 
     def copy_frame(self, record) -> None:
         """Log a frame read from a session (a reader FrameRecord) by copying its input
@@ -189,7 +199,10 @@ class SessionWriter:
             if topic in record.inputs:
                 msg, meta = record.inputs[topic]
                 ours = _OUR_CLASSES[msg.DESCRIPTOR.full_name].FromString(msg.SerializeToString())
+                if topic == S.TOPIC_GROUND_TRUTH and ours.frame_id == LEGACY_MAP:
+                    ours.frame_id = S.FRAME_MAP  # an older log's name for the map frame: one naming in the new file
                 self._write(topic, ours, ns, record.index, {**meta, **defaults.get(topic, {})})
+        self._note_sensor(frame)
         self._end_frame(frame.timestamp, ns)
 
     def _begin_frame(self, index: int, timestamp: float, ns: int | None = None) -> int:
@@ -277,6 +290,9 @@ class SessionWriter:
         ns = self._estimate_ns(estimate)
         seq = int(estimate.frame)
         self._batch = []
+        tf = frame_transforms_msg(estimate, self._sensor, ns)
+        if tf is not None:  # first: the frames exist when the pose and the BEV arrive
+            self._write(S.TOPIC_TF, tf, ns, seq)
         if estimate.pose is not None:
             self._write(S.TOPIC_POSE, S.estimate_pose_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})
         self._write(S.TOPIC_HYPOTHESES, S.hypotheses_to_msg(estimate, ns), ns, seq, {S.HEADING_AXIS_KEY: "x"})

@@ -41,8 +41,8 @@ def _add_floorplan_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tum", type=Path, metavar="PATH", help="also write the trajectory as a TUM file for evo (default OUT/trajectory.tum)")
     p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
                    help="serve the session's topics live to Foxglove on ws://127.0.0.1:PORT (default 8765; the [live] extra)")
-    p.add_argument("--ros2", action="store_true", help="also write OUT/ros2.mcap: ROS 2 messages (PoseStamped /zfloc/pose, "
-                   "map->odom on /tf, OccupancyGrid /zfloc/floorplan, /zfloc/groundtruth) for ROS tools and evo")
+    p.add_argument("--ros2", action="store_true", help="also write OUT/ros2.mcap: ROS 2 messages (PoseWithCovarianceStamped /zfloc/pose, "
+                   "map->odom->base_link on /tf, OccupancyGrid /zfloc/floorplan, /zfloc/groundtruth) for ROS tools and evo")
 
 
 def _split(text: str | None) -> list[str] | None:
