@@ -28,29 +28,43 @@ from .cli_support import print_warning
 LATCHED = ("/zfloc/floorplan", "/zfloc/bev")  # topics a late subscriber gets the last message of
 DEFAULT_PORT = 8765
 POLL = 0.1  # seconds between looks for late subscribers while lingering
+MAX_READVERTISE = 3  # times a channel is advertised anew after refused subscriptions
+
+
+_UNKNOWN_CHANNEL = re.compile(r"subscribe to unknown channel: (\d+)")
 
 
 class _OncePerKind(logging.Handler):
     """The SDK's log records as warn() lines, each kind once: records that differ only in
-    numbers (client ports, channel ids) are one kind."""
+    numbers (client ports, channel ids) are one kind. on_unknown(channel id): a client's
+    subscription the SDK refused as for an unknown channel."""
 
-    def __init__(self, warn):
+    def __init__(self, warn, on_unknown=None):
         super().__init__(logging.WARNING)
         self._warn = warn
+        self._on_unknown = on_unknown
         self._seen: set[str] = set()
         self._lock_seen = threading.Lock()
 
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            text = " ".join(record.getMessage().split())
-        except Exception:  # noqa: BLE001 - a malformed record must not break the SDK's thread
-            return
+    def say(self, text: str) -> None:
+        """warn(text), unless a text like it was said before."""
+        text = " ".join(text.split())
         kind = re.sub(r"\d+", "#", text)
         with self._lock_seen:
             if kind in self._seen:
                 return
             self._seen.add(kind)
-        self._warn(f"live view (Foxglove SDK): {text} (further ones like it are not shown)")
+        self._warn(f"{text} (further ones like it are not shown)")
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = record.getMessage()
+        except Exception:  # noqa: BLE001 - a malformed record must not break the SDK's thread
+            return
+        m = _UNKNOWN_CHANNEL.search(text)
+        if m and self._on_unknown is not None:
+            self._on_unknown(int(m.group(1)))
+        self.say(f"live view (Foxglove SDK): {text}")
 
 
 class LiveServer:
@@ -70,8 +84,11 @@ class LiveServer:
         self._latched: dict[int, tuple[object, bytes, int]] = {}  # channel id -> (channel, last message, log time)
         self._lock = threading.Lock()
         self._resend: set[int] = set()
+        self._readvertise: set[int] = set()  # channel ids a subscription to was refused as unknown
+        self._readvertised: dict[tuple, int] = {}  # channel key -> times made anew
+        self._records: dict[tuple, object] = {}  # channel key -> a record of it (to make it anew)
         self._log = logging.getLogger("foxglove")
-        self._log_handler = _OncePerKind(warn)
+        self._log_handler = _OncePerKind(warn, self._refused)
         self._log_state = (self._log.propagate, self._log.level)
         self._log.addHandler(self._log_handler)
         self._log.propagate = False  # else Python's last-resort handler prints each record raw
@@ -90,7 +107,7 @@ class LiveServer:
             # the SDK on a loopback port of its own; clients come through the bridge
             self._server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self._context,
                                                  server_listener=_Listener())
-            self._bridge = SubprotocolBridge(host, port, self._server.port, warn=self._log_handler._warn)
+            self._bridge = SubprotocolBridge(host, port, self._server.port, warn=self._log_handler.say)
         except Exception as err:  # noqa: BLE001 - OSError from the bridge, the SDK's own error type
             self.close()
             raise InputError(f"--live: cannot serve on {host}:{port}: {err}".splitlines()[0]) from None
@@ -113,7 +130,29 @@ class LiveServer:
             channel = self._foxglove.Channel(rec.topic, schema=schema, message_encoding=rec.message_encoding,
                                              context=self._context, metadata=dict(rec.metadata))
             self._channels[key] = channel
+            self._records[key] = rec
         return channel
+
+    def _refused(self, channel_id: int) -> None:
+        # foxglove-sdk 0.30 can refuse a subscription sent right after an advertisement
+        # ("unknown channel": it sends the advertisement before it records the channel for
+        # that client), and Foxglove does not ask again: the topic, the floorplan often,
+        # stays empty. Advertising the channel anew (next flush) makes clients subscribe again.
+        with self._lock:
+            self._readvertise.add(channel_id)
+
+    def _advertise_anew(self, channel_ids) -> None:
+        for key, channel in list(self._channels.items()):
+            if channel.id() not in channel_ids or self._readvertised.get(key, 0) >= MAX_READVERTISE:
+                continue
+            self._readvertised[key] = self._readvertised.get(key, 0) + 1
+            old_id = channel.id()
+            channel.close()  # clients get an unadvertise, then the advertisement of the new one
+            del self._channels[key]
+            fresh = self._channel(self._records[key])
+            if old_id in self._latched:
+                _, data, log_time = self._latched.pop(old_id)
+                self._latched[fresh.id()] = (fresh, data, log_time)
 
     def __call__(self, batch) -> None:
         """One SessionWriter batch (a frame's inputs, or an estimate's outputs)."""
@@ -125,9 +164,13 @@ class LiveServer:
         self.flush()
 
     def flush(self) -> None:
-        """Re-log the latched messages of channels subscribed to since the last call."""
+        """Advertise anew the channels a subscription to was refused; re-log the latched
+        messages of channels subscribed to since the last call."""
         with self._lock:
             resend, self._resend = self._resend, set()
+            refused, self._readvertise = self._readvertise, set()
+        if refused:
+            self._advertise_anew(refused)
         for channel_id in resend:
             if channel_id in self._latched:
                 channel, data, log_time = self._latched[channel_id]
