@@ -329,6 +329,28 @@ def test_run_rate_paces_to_the_inputs_clock_and_live_linger_ends_the_serving(wal
     assert fake.sleeps == []  # unpaced unless asked
 
 
+@needs_live
+def test_live_serves_on_after_the_run_until_ctrl_c_which_ends_it_with_exit_0(walk, tmp_path, capsys, monkeypatch):
+    import time
+    import types
+
+    from zfloc_stream.tools import live
+
+    scene, frames = walk
+    naps = []
+
+    def nap(seconds):  # the third look for late viewers is interrupted, as Ctrl-C would
+        naps.append(seconds)
+        if len(naps) == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(live, "time", types.SimpleNamespace(monotonic=time.monotonic, sleep=nap))
+    inputs = _session(tmp_path, scene, frames[:4])
+    assert main(["run", "--input", inputs, "--live", "0", "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "(Ctrl-C to stop)" in out and len(naps) == 3
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--rate", "0"], "--rate must be a positive number"),
     (["--rate", "nan"], "--rate must be a positive number"),
