@@ -17,7 +17,7 @@ EPILOG = """examples:
   zfloc-stream run --floorplan map.yaml --input intel.log.gz --odometry-noise 0.02 --out out/
   zfloc-stream run --floorplan plan.dxf --input robot.mcap --topic scan=/front/scan --out out/   # a ROS 2 bag
   zfloc-stream run --floorplan map.yaml --input robot.mcap --groundtruth gt.tum --ros2 --out out/   # + errors, ROS 2 messages
-  zfloc-stream run --input session.mcap --live 8765 --out out/   # watch it in Foxglove (ws://127.0.0.1:8765)
+  zfloc-stream run --input session.mcap --live 8765 --realtime --out out/   # watch it in Foxglove as recorded (ws://127.0.0.1:8765)
   zfloc-stream demo --floorplan plan.dxf              # a simulated walk through your own building
   zfloc-stream export out/session.mcap --tum out.txt  # the logged trajectory for evo
   zfloc-stream run --input phone.mcap --depth-model depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf \
@@ -40,7 +40,11 @@ def _add_floorplan_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skip-layers", help="DXF plans: comma-separated layers to leave out (furniture, text, ...)")
     p.add_argument("--tum", type=Path, metavar="PATH", help="also write the trajectory as a TUM file for evo (default OUT/trajectory.tum)")
     p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
-                   help="serve the session's topics live to Foxglove on ws://127.0.0.1:PORT (default 8765; the [live] extra)")
+                   help="serve the session's topics live to Foxglove on ws://127.0.0.1:PORT (default 8765; the [live] extra); "
+                   "after the run it keeps serving until Ctrl-C")
+    p.add_argument("--live-linger", type=float, metavar="S", help="with --live: after the run serve S more seconds, then exit")
+    p.add_argument("--realtime", action="store_true", help="pace the run to the input's timestamps (as it was recorded)")
+    p.add_argument("--rate", type=float, metavar="X", help="pace the run at X times real time (implies --realtime)")
     p.add_argument("--ros2", action="store_true", help="also write OUT/ros2.mcap: ROS 2 messages (PoseWithCovarianceStamped /zfloc/pose, "
                    "map->odom->base_link on /tf, OccupancyGrid /zfloc/floorplan, /zfloc/groundtruth) for ROS tools and evo")
 
@@ -96,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="examples:\n  zfloc-stream run --floorplan map.yaml --input session.mcap --out out/\n"
         "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/\n"
         "  zfloc-stream run --floorplan map.yaml --input run.mcap --groundtruth gt.csv --scans 0:200 --ros2 --out out/\n"
-        "  zfloc-stream run --input session.mcap --live --out out/          # open ws://127.0.0.1:8765 in Foxglove",
+        "  zfloc-stream run --input session.mcap --live --out out/          # open ws://127.0.0.1:8765 in Foxglove\n"
+        "  zfloc-stream run --floorplan map.yaml --input intel.log.gz --live --rate 4 --live-linger 60 --out out/   # 4x real time",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument("--floorplan", type=Path, help="ROS map_server YAML, an image with --resolution and --origin, or a "
@@ -164,19 +169,51 @@ def _run_settings(args, base_overrides: dict | None = None):
     return settings.model_copy(update={"backbones": settings.backbones.model_copy(update=models)})
 
 
+def _check_live_options(args) -> None:
+    """--live-linger, --realtime and --rate, checked before any work."""
+    import math
+
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        raise InputError(f"--rate must be a positive number (times real time), got {args.rate:g}")
+    if args.live_linger is not None:
+        if args.live is None:
+            raise InputError("--live-linger applies to --live")
+        if not (math.isfinite(args.live_linger) and args.live_linger >= 0):
+            raise InputError(f"--live-linger must be a number of seconds >= 0, got {args.live_linger:g}")
+
+
 def _start_live(args):
     if args.live is None:
         return None
     from .live import LiveServer
 
     server = LiveServer(args.live)
-    print(f"live view: {server.url} (Foxglove: Open connection -> Foxglove WebSocket)", flush=True)
+    print(f"live view: {server.url} (Foxglove or Lichtblick: Open connection -> Foxglove WebSocket)", flush=True)
     return server
+
+
+def _paced(args, frames):
+    """The frames, paced to their timestamps under --realtime / --rate X."""
+    if args.rate is None and not args.realtime:
+        return frames
+    from .pacing import paced
+
+    return paced(frames, rate=1.0 if args.rate is None else args.rate)
+
+
+def _linger(args, live) -> None:
+    """After the run: --live serves on until Ctrl-C, or --live-linger S seconds."""
+    if live is None:
+        return
+    until = "Ctrl-C to stop" if args.live_linger is None else f"for {args.live_linger:g} s"
+    print(f"live view: run done; still serving {live.url} ({until})", flush=True)
+    live.linger(args.live_linger)
 
 
 def cmd_demo(args) -> int:
     if args.frames < 1:
         raise InputError("--frames must be at least 1")
+    _check_live_options(args)
     prepare_out_dir(args.out, create=False)
     from ..sim import SimSettings, build_scene, simulate
     from .session_runner import run_session
@@ -192,13 +229,14 @@ def cmd_demo(args) -> int:
     live = _start_live(args)
     try:
         outcome = run_session(
-            scene.floorplan, iter(sequence), settings, args.out, total=args.frames,
+            scene.floorplan, _paced(args, iter(sequence)), settings, args.out, total=args.frames,
             progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum, live=live, ros2=args.ros2,
         )
+        _report(outcome, settings)
+        _linger(args, live)
     finally:
         if live is not None:
             live.close()
-    _report(outcome, settings)
     return 0
 
 
@@ -214,6 +252,7 @@ def _topics_line(args, sequence) -> str:
 
 
 def cmd_run(args) -> int:
+    _check_live_options(args)
     prepare_out_dir(args.out, create=False)
     from ..backbones import Perception
     from ..datasets import detect_source
@@ -263,14 +302,15 @@ def cmd_run(args) -> int:
     live = _start_live(args)
     try:
         outcome = run_session(
-            plan, sequence.frames(start, stop), settings, args.out, total=stop - start,
+            plan, _paced(args, sequence.frames(start, stop)), settings, args.out, total=stop - start,
             progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum, perception=perception,
             groundtruth=groundtruth, first_index=start, live=live, ros2=args.ros2,
         )
+        _report(outcome, settings)
+        _linger(args, live)
     finally:
         if live is not None:
             live.close()
-    _report(outcome, settings)
     return 0
 
 
