@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import FrameError
 
-# Label codes (DESIGN.md, /camera/labels mono8)
+# Label codes (docs/inputs.md, /camera/labels mono8)
 UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
 
 

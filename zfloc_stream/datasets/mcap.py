@@ -1,4 +1,4 @@
-"""Recorded MCAP sessions (ours or another tool's on the DESIGN.md topics):
+"""Recorded MCAP sessions (ours or another tool's on the topics of docs/inputs.md):
 `mcap:/runs/a.mcap,/runs/b.mcap`.
 
 Frames, their ground truth (/groundtruth/pose, NaN where absent) and the floorplan come

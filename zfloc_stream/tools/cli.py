@@ -133,9 +133,18 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--tum", type=Path, required=True, metavar="PATH", help="TUM file to write")
     export.add_argument("--salvage", action="store_true", help="a session cut off by a crash (or damaged): read it as far as its intact chunks go")
 
-    config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
-    config.add_argument("--config", type=Path, help="YAML settings file")
-    config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    config = sub.add_parser(
+        "config",
+        help="print the settings (defaults, or a file with overrides) as YAML",
+        description="Print the settings as YAML: the defaults, updated by --config then --set. Edit the output "
+        "and pass it back with --config to any command.",
+        epilog="examples:\n  zfloc-stream config > my.yaml                    # the defaults, to edit\n"
+        "  zfloc-stream config --config my.yaml --set seed=3  # what a run with these overrides would use\n"
+        "  zfloc-stream run --config my.yaml --input session.mcap --out out/",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    config.add_argument("--config", type=Path, help="YAML settings file (overrides the defaults)")
+    config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override one setting, e.g. estimator.ransac.iterations=300")
 
     from .map_from_log import register as register_map_from_log
 
