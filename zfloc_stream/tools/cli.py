@@ -106,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--input", type=Path, required=True, help="session.mcap, a ROS 2 bag (.mcap), a Gibson(t) scene folder, or a Carmen log")
     run.add_argument("--groundtruth", type=Path, metavar="FILE", help="ground truth for any input: a TUM file (matched by "
                      "timestamp) or a CSV with x,y,theta columns (+ frame or timestamp; else one row per input frame); "
-                     "replaces the input's own")
+                     "replaces the input's own where it has a pose; a warning says how many frames it covers")
     run.add_argument("--scans", metavar="START:STOP", help="localize input frames [START, STOP) only (0-based; for a Carmen "
                      "log the scans map-from-log --exclude START:STOP leaves out)")
     run.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
@@ -255,6 +255,8 @@ def cmd_run(args) -> int:
             raise InputError(f"--scans {args.scans}: {args.input} has only {sequence.n_frames} frames")
         stop = min(stop, sequence.n_frames)
     print(_topics_line(args, sequence) + (f"; frames {start}-{stop - 1} of {sequence.n_frames}" if window else f"; {sequence.n_frames} frames"), flush=True)
+    if floorplan is None and sequence.floorplan_source:
+        print(f"floorplan: {sequence.floorplan_source}", flush=True)
     if floorplan is None and sequence.source.startswith("carmen:"):
         if window is not None:
             print_warning(f"no --floorplan: the map is built from this log without scans {start}-{stop - 1} "
@@ -279,45 +281,27 @@ def cmd_run(args) -> int:
     finally:
         if live is not None:
             live.close()
+    if groundtruth is not None and outcome.estimates:  # a file that covers only part of the input (or none) is said
+        note = groundtruth.coverage_note(len(outcome.estimates), outcome.truth_from_file, outcome.truth_kept, start,
+                                         (outcome.estimates[0].timestamp, outcome.estimates[-1].timestamp))
+        if note:
+            print_warning(note)
     _report(outcome, settings)
     return 0
 
 
 def _report(outcome, settings) -> None:
-    import numpy as np
-
     from ..tum import moved_note
+    from .run_summary import report_lines
 
-    last = outcome.estimates[-1] if outcome.estimates else None
     extra = "".join(f", {p.name}" for p in (outcome.truth_tum_path, outcome.ros2_path) if p is not None)
     print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap{extra} ({len(outcome.estimates)} frames); "
           f"TUM: {outcome.tum_path} ({outcome.tum_rows} poses)")
     note = moved_note(outcome.tum_path, outcome.tum_moved, outcome.tum_rows)
     if note:
         print(f"note: {note}")
-    if last is None:
-        return
-    if last.pose is None:
-        print(f"final status: {last.status}, no pose yet ({len(outcome.estimates)} frames: too few for a first estimate)")
-    else:
-        print(f"final status: {last.status}, score {last.score:.3f}, scale {last.scale:.3f}")
-    threshold = settings.logging.success_distance
-    summary = outcome.error_summary(threshold)
-    if summary is None:
-        return
-    if summary.posed:
-        print(f"position error over {summary.posed} posed frames with ground truth: mean {summary.mean:.2f} m, "
-              f"median {summary.median:.2f} m, max {summary.max:.2f} m; {summary.off} frames more than {threshold:g} m off"
-              + (f"; {summary.frames - summary.posed} frames without a pose" if summary.frames > summary.posed else ""))
-    else:
-        print(f"position error: no pose yet on any of the {summary.frames} frames with ground truth")
-    print(f"frames within {threshold:g} m by status: " + ", ".join(f"{status} {k}/{n}" for status, (k, n) in summary.by_status.items()))
-    errors = outcome.final_errors()
-    if errors is not None and last.pose is not None:
-        ok = bool((errors <= threshold).all())
-        missing = int((~np.isfinite(errors)).sum())
-        tail = f"last-{len(errors)} max {errors.max():.3f} m" if not missing else f"{missing} of the last {len(errors)} frames without a pose"
-        print(f"final position error: {errors[-1]:.3f} m; {tail}; success@{threshold:g}m: {'yes' if ok else 'no'}")
+    for line in report_lines(outcome, settings.logging.success_distance):
+        print(line)
 
 
 def cmd_export(args) -> int:
