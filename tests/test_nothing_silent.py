@@ -151,3 +151,87 @@ def test_the_summary_says_how_the_run_went_how_fast_and_rmse_as_evo(walk, tmp_pa
     est_stamps, est = read_tum(tmp_path / "o" / "trajectory.tum")
     err = np.linalg.norm(est[:, :2] - truth[np.searchsorted(stamps, est_stamps), :2], axis=1)  # both at z = 0
     assert rmse == pytest.approx(np.sqrt(np.mean(err**2)), abs=0.006)
+
+
+# --- small slips ----------------------------------------------------------------------------------
+def test_replay_check_of_a_session_cut_before_its_last_outputs_counts_what_it_checked(walk, tmp_path, capsys):
+    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.tools.replay_cli import main as replay
+
+    tmp, scene, seq = walk
+    settings = Settings()
+    path = tmp_path / "cut.mcap"
+    with Localizer(scene.floorplan, settings) as loc, SessionWriter(path, settings, scene.floorplan) as log:
+        for i, frame in enumerate(seq.frames[:12]):
+            est = loc.push(log.write_frame(i, frame))
+            if i < 11:  # the run stopped after logging frame 11's input, before its outputs
+                log.write_estimate(est, loc)
+    assert replay([str(path), "--check", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "11 frames checked (0-10); frame 11 replayed but not checked: the file ends before their logged outputs" in out, out
+
+
+def test_overlay_breaks_the_path_where_the_estimate_jumps_to_another_place():
+    import matplotlib.pyplot as plt
+
+    from zfloc_stream.overlay import jumps, overlay_figure
+    from zfloc_stream.sim2 import Sim2
+
+    plane = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], [1.5, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    here = Sim2(1.0, 0.0, np.array([1.0, 1.0]))
+    there = Sim2(1.0, 0.0, np.array([1.0, 7.0]))  # another mode, 6 m away
+    nudged = Sim2(1.0, 0.02, np.array([1.05, 1.0]))  # the same mode, refined
+    alignments = [here, here, there, there, nudged]
+    # frame 4 is reported by `nudged` but follows `there`: a jump back of ~6 m
+    est = np.array([np.array(a.apply_pose(*p)) for a, p in zip(alignments, plane)])
+    np.testing.assert_array_equal(jumps(est, alignments), [False, False, True, False, True])
+    smooth = [here, here, nudged, nudged, nudged]
+    est_smooth = np.array([np.array(a.apply_pose(*p)) for a, p in zip(smooth, plane)])
+    assert not jumps(est_smooth, smooth).any()
+    fig = overlay_figure(build_scene("rooms", seed=0).floorplan, est, statuses=["tracking"] * 5, alignments=alignments)
+    ax = fig.axes[0]
+    segments = [s for c in ax.collections for s in c.get_segments()]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    plt.close(fig)
+    assert len(segments) == 2  # 0-1 and 2-3; no line into frames 2 and 4
+    assert any(label.startswith("estimate jumped here (2x") for label in labels)
+
+
+def test_study_tables_tell_two_sessions_named_alike_apart():
+    from zfloc_stream.study.report import dataset_labels, markdown_table
+
+    specs = ["mcap:/data/fhw/session.mcap", "mcap:/data/aces/session.mcap", "carmen:/logs/intel.log.gz"]
+    labels = dataset_labels(specs)
+    assert labels == {specs[0]: "mcap:fhw/session.mcap", specs[1]: "mcap:aces/session.mcap", specs[2]: "carmen:intel.log.gz"}
+    stat = {"mean": 0.5, "std": float("nan")}
+    summary = [{"dataset": d, "length": 15, "n_runs": 1, "n_errors": 0, "n_no_pose": 0, "success_rate": {"1": stat},
+                "rmse_succ": stat, "rmse_all": stat} for d in specs]
+    table = markdown_table(summary, [15], [1.0])
+    assert "| mcap:fhw/session.mcap |" in table and "| mcap:aces/session.mcap |" in table
+
+
+def test_every_command_help_has_examples(capsys):
+    from zfloc_stream.tools.cli import build_parser
+    from zfloc_stream.tools.cli_support import _subparsers
+    from zfloc_stream.tools.replay_cli import main as replay
+    from zfloc_stream.tools.study_cli import main as study
+
+    commands = [(main, [name, "--help"]) for name in _subparsers(build_parser())] + [(main, ["--help"]), (replay, ["--help"]), (study, ["--help"])]
+    assert len(commands) >= 8
+    for entry, argv in commands:
+        with pytest.raises(SystemExit) as exit_info:
+            entry(argv)
+        assert exit_info.value.code == 0
+        text = capsys.readouterr().out
+        assert "\nexamples:\n  zfloc-" in text, (argv, text)
+
+
+def test_the_public_classes_say_what_they_are_and_what_each_field_means():
+    from zfloc_stream.estimate import Estimate
+    from zfloc_stream.localizer import Localizer
+
+    assert "push(frame)" in Localizer.__doc__ and "Estimate" in Localizer.__doc__
+    doc = Estimate.__doc__
+    for name in [f.name for f in dataclasses.fields(Estimate)] + ["scale", "n_hypotheses"]:
+        assert re.search(rf"^    {name}: \S", doc, re.M), name
+    assert "1 is a perfect match" in doc
