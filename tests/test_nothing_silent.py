@@ -72,6 +72,10 @@ def test_groundtruth_for_part_of_the_frames_is_said_and_what_can_be_computed_is_
     assert "position error over" in out
     assert re.search(r"success@1m: not computed: it needs ground truth on each of the last 10 frames, 2 of them have it; "
                      r"last frame with ground truth: 11, error ([\d.]+ m|- \(no pose\))", out), out
+    # a session with its own truth keeps it where the file has none, and says so
+    code, out, err = run(capsys, "--input", tmp / "own.mcap", "--groundtruth", tmp / "short.csv", "--out", tmp_path / "own")
+    assert code == 0 and "a pose for 12 of the 20 frames" in err and "the input's own ground truth kept on 8 other frames" in err, err
+    assert "success@1m: not computed" not in out and "final position error" in out
     # the file covering every frame is not worth a word
     code, out, err = run(capsys, "--input", tmp / "bare.mcap", "--groundtruth", tmp / "gt.tum", "--out", tmp_path / "full")
     assert code == 0 and "warning" not in err, err

@@ -47,7 +47,7 @@ class GroundTruth:
         else:
             its = f"its stamps span {self._stamps[0]:.3f}-{self._stamps[1]:.3f} s" if self._stamps else "it holds no row"
             yours = f"the input's {stamps[0]:.3f}-{stamps[1]:.3f} s"
-        own = f"; the input's own ground truth kept on {kept}" if kept else ""
+        own = f"; the input's own ground truth kept on {kept} other frames" if kept else ""
         if matched == 0:
             return (f"ground truth {self.path.name}: no pose for any of the {frames} frames ({its}, {yours})"
                     + (f"; not used: the input's own ground truth kept ({kept} frames)" if kept else "; no position errors"))
