@@ -111,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "log the scans map-from-log --exclude START:STOP leaves out)")
     run.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
                      help="ROS 2 bags: the topic for a role (scan, depth, camera_info, odom, tf, tf_static), e.g. scan=/front/scan")
-    run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
+    run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs and Gibson(t) scenes, refused for MCAP inputs (recorded odometry) (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
     run.add_argument("--out", type=Path, default=Path("zfloc-run"), help="output folder (default ./zfloc-run)")
     run.add_argument("--depth-model", metavar="ID_OR_DIR", help="metric depth network for RGB frames: a local folder or a "
                      "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
