@@ -41,7 +41,7 @@ def laser(tmp_path_factory):
 
 
 def _summary(stdout: str) -> dict:
-    m = re.search(r"position error over (\d+) posed frames with ground truth: mean ([\d.]+) m, median ([\d.]+) m, "
+    m = re.search(r"position error over (\d+) posed frames with ground truth: RMSE [\d.]+ m, mean ([\d.]+) m, median ([\d.]+) m, "
                   r"max ([\d.]+) m; (\d+) frames more than 1 m off", stdout)
     assert m, stdout
     return {"posed": int(m[1]), "mean": float(m[2]), "median": float(m[3]), "max": float(m[4]), "off": int(m[5])}

@@ -25,6 +25,32 @@ class Alternative:
 
 @dataclass(frozen=True)
 class Estimate:
+    """What `Localizer.push` returns for one frame.
+
+    frame: the frame's push number (0 for the first frame pushed).
+    timestamp: the frame's own stamp, seconds.
+    status: initializing (no mode confirmed yet), tracking (one confirmed mode clearly
+        ahead), ambiguous (confirmed rivals at other places), lost (the tracked mode
+        collapsed; a global search runs again). docs/status.md gives the rules.
+    pose: (x, y, theta) of the sensor in the floorplan frame (metres, radians); the best
+        mode's alignment applied to the frame's odometry pose. None before any hypothesis.
+    covariance: (3, 3) of pose (x, y, theta): the best mode's filter covariance carried to
+        the pose (tracking.HypothesisTracker.pose_covariance); None without a pose.
+    alignment: the best mode's odometry-plane -> floorplan similarity (Sim2: s, R, t).
+    score: the best mode's latest score C = Cc - Cv in [-1, 1]: the share of the seen wall
+        points that lie on a plan wall (Cc) minus the share of plan walls crossing floor
+        seen free (Cv). 1 is a perfect match, 0 or less no support; on a real building a
+        correct place scores well below 1 (furniture, clutter, walls the plan lacks). It
+        ranks the places of one run; it is no probability (see confidence). nan: none.
+    alternatives: every live mode (the reported one first) with its pose, weight and score.
+    timings: seconds per stage spent in this push (bev, round, ...).
+    skipped: why the frame was refused and not fused (None: fused).
+    round_skipped: why the round due at this frame did not run (None: it ran, or none due).
+    confidence: see the field's comment.
+    scale: the alignment's scale (metres of floorplan per odometry unit; nan without).
+    n_hypotheses: the number of live modes.
+    """
+
     frame: int
     timestamp: float
     status: Status

@@ -17,7 +17,7 @@ from .errors import FrameError
 # integer cells (and float precision) end long before 1e300 (issue 44: an OverflowError)
 MAX_POSITION_M = 1e9
 
-# Label codes (DESIGN.md, /camera/labels mono8)
+# Label codes (docs/inputs.md, /camera/labels mono8)
 UNKNOWN, WALL, FLOOR, CEILING, OTHER = 0, 1, 2, 3, 4
 
 

@@ -27,10 +27,32 @@ from .tum import read_tum
 class GroundTruth:
     """at(frame_index, stamp) -> (x, y, theta) or None (unknown for that frame)."""
 
-    def __init__(self, path: Path, by_frame: dict[int, np.ndarray] | None = None, track: PoseTrack | None = None):
+    def __init__(self, path: Path, by_frame: dict[int, np.ndarray] | None = None, track: PoseTrack | None = None,
+                 stamps: tuple[float, float] | None = None):
         self.path = path
         self._by_frame = by_frame
         self._track = track
+        self._stamps = stamps  # first and last stamp of a track's rows
+
+    def coverage_note(self, frames: int, matched: int, kept: int, first_index: int, stamps: tuple[float, float]) -> str | None:
+        """What a run whose `frames` frames (input numbers from first_index, stamps the first
+        and last) got from this file: None when it gave a pose for each; else one line for
+        a `warning:` (matched: frames it gave a pose for; kept: others that kept their own)."""
+        if matched == frames or not frames:
+            return None
+        if self._by_frame is not None:
+            rows = sorted(self._by_frame)
+            its = f"its rows cover frames {rows[0]}-{rows[-1]}" if rows else "it holds no complete row"
+            yours = f"the input's frames {first_index}-{first_index + frames - 1}"
+        else:
+            its = f"its stamps span {self._stamps[0]:.3f}-{self._stamps[1]:.3f} s" if self._stamps else "it holds no row"
+            yours = f"the input's {stamps[0]:.3f}-{stamps[1]:.3f} s"
+        own = f"; the input's own ground truth kept on {kept} other frames" if kept else ""
+        if matched == 0:
+            return (f"ground truth {self.path.name}: no pose for any of the {frames} frames ({its}, {yours})"
+                    + (f"; not used: the input's own ground truth kept ({kept} frames)" if kept else "; no position errors"))
+        return (f"ground truth {self.path.name}: a pose for {matched} of the {frames} frames ({its}, {yours}){own}"
+                + ("; the errors and success figures cover only frames with ground truth" if matched + kept < frames else ""))
 
     def at(self, index: int, stamp: float) -> np.ndarray | None:
         if self._by_frame is not None:
@@ -41,11 +63,12 @@ class GroundTruth:
         return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
 
 
-def _track(path: Path, stamps, poses, max_gap: float | None) -> PoseTrack:
+def _track(path: Path, stamps, poses, max_gap: float | None) -> GroundTruth:
     track = PoseTrack(f"ground truth {path.name}", max_gap)
     for t, (x, y, th) in zip(stamps, poses):
         track.add(int(round(float(t) * 1e9)), planar_pose_matrix(x, y, th))
-    return track
+    span = (float(min(stamps)), float(max(stamps))) if len(stamps) else None
+    return GroundTruth(path, track=track, stamps=span)
 
 
 def _looks_like_tum(text: str) -> bool:
@@ -69,7 +92,7 @@ def load_groundtruth(path: str | Path, max_gap: float | None = None) -> GroundTr
         raise InputError(f"{path}: ground truth must be a TUM or CSV text file") from None
     if _looks_like_tum(text):
         stamps, poses = read_tum(path)
-        return GroundTruth(path, track=_track(path, stamps, poses, max_gap))
+        return _track(path, stamps, poses, max_gap)
     rows = list(csv.DictReader(line for line in text.splitlines() if line.strip() and not line.startswith("#")))
     columns = {c.strip().lower(): c for c in (rows[0].keys() if rows else [])}
     missing = [c for c in ("x", "y", "theta") if c not in columns]
@@ -86,7 +109,7 @@ def load_groundtruth(path: str | Path, max_gap: float | None = None) -> GroundTr
             frames = [int(float(r[columns["frame"]])) for r in rows]
         elif "timestamp" in columns:
             stamps = [float(r[columns["timestamp"]]) for r in rows]
-            return GroundTruth(path, track=_track(path, stamps, poses, max_gap))
+            return _track(path, stamps, poses, max_gap)
         else:
             frames = list(range(len(rows)))
     except (TypeError, ValueError):

@@ -43,6 +43,17 @@ from .tracking import HypothesisTracker
 
 
 class Localizer:
+    """Localizes a stream of frames on one floorplan, online: `push(frame)` fuses a
+    camera or laser frame (frames.CameraFrame / frames.LaserFrame, with its odometry
+    pose) and returns an estimate.Estimate for it at once: status, pose in the floorplan
+    frame, covariance, score, confidence and the rival places. Use it as a context
+    manager (or call close()) so a round running on a worker thread is stopped.
+
+    floorplan: floorplan.Floorplan (plan_loading.load_floorplan reads a ROS map YAML, an
+    image or a DXF/SVG/GeoJSON drawing). settings: config.Settings (defaults when None).
+    Deterministic for given settings (settings.seed) and frames.
+    """
+
     def __init__(self, floorplan: Floorplan, settings: Settings | None = None, perception: Perception | None = None):
         """perception: the networks for RGB-only camera frames; by default made from
         settings.backbones when the first such frame arrives (a replay of a session whose

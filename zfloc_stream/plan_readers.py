@@ -187,10 +187,16 @@ def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_0
     _dxf_expansion(doc, path, max_entities)  # also bounds the nesting: each level is an entity
     wanted = None if not layers else {name.lower() for name in layers}
     skipped = {name.lower() for name in skip_layers or ()}
-    known = {layer.dxf.name.lower() for layer in doc.layers}
-    missing = sorted((wanted or set()) - known)
-    if missing:
-        raise FloorplanError(f"{path}: no layer(s) {', '.join(missing)} (layers: {', '.join(sorted(layer.dxf.name for layer in doc.layers))})")
+    # a layer exists when the LAYER table names it or an entity sits on it (a table may
+    # lack layers its entities use: ezdxf reads and audits such files clean)
+    names = {layer.dxf.name for layer in doc.layers}
+    names |= {e.dxf.get("layer", "0") for space in (doc.modelspace(), *doc.blocks) for e in space}
+    known = {name.lower() for name in names}
+    for option, asked in (("--layers", wanted or set()), ("--skip-layers", skipped)):
+        missing = sorted(asked - known)
+        if missing:
+            raise FloorplanError(f"{path}: no layer(s) {', '.join(missing)} ({option}); "
+                                 f"its layers: {', '.join(sorted(names, key=str.lower))}")
     geometry = VectorGeometry()
     chord = ARC_CHORD / factor
 

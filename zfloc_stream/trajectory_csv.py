@@ -1,4 +1,4 @@
-"""trajectory.csv: one row per pushed frame (public contract, DESIGN.md).
+"""trajectory.csv: one row per pushed frame (public contract, docs/inputs.md).
 
 Rows are flushed as they are written so a crash loses at most the frame in flight.
 Columns: frame, timestamp, x, y, theta, scale, score, n_hypotheses, status, confidence.

@@ -69,6 +69,9 @@ def detect_source(
         raise InputError(f"{path} is a folder but not a Gibson(t) scene (needs {', '.join(gibson.SCENE_FILES)}) "
                          "and holds no session .mcap")
     head = _head(path)
+    if head.startswith(MCAP_MAGIC) and odometry_noise is not None:  # recorded odometry: no synthetic drift to set
+        raise InputError(f"--odometry-noise applies to Carmen logs and Gibson(t) scenes, whose odometry is made from "
+                         f"ground truth; {path} is an MCAP file with its own odometry")
     if head.startswith(MCAP_MAGIC) and ros2.is_ros2_mcap(path):
         return ros2.bag_sequence(path, settings, floorplan=floorplan, topics=topics)
     if topics:

@@ -61,6 +61,7 @@ class Sequence:
         self.source = source
         self.needs_depth_network = needs_depth_network
         self.topics: dict[str, str] = {}  # role -> topic read, for the sources that have topics
+        self.floorplan_source: str | None = None  # where a floorplan nobody named comes from, said by `run`
 
     @property
     def ground_truth(self) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Recorded MCAP sessions (ours or another tool's on the DESIGN.md topics):
+"""Recorded MCAP sessions (ours or another tool's on the topics of docs/inputs.md):
 `mcap:/runs/a.mcap,/runs/b.mcap`.
 
 Frames, their ground truth (/groundtruth/pose, NaN where absent) and the floorplan come
@@ -76,6 +76,12 @@ def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = F
     from ..session.schemas import INPUT_TOPICS
 
     sequence.topics = {t.rsplit("/", 1)[-1]: t for t in INPUT_TOPICS if session.topics is None or t in session.topics}
+    if floorplan is None:
+        sibling = path.parent / SIBLING_FLOORPLAN
+        if session.floorplan_files:
+            sequence.floorplan_source = "the one the session carries"
+        elif sibling.is_file():
+            sequence.floorplan_source = f"{sibling}, beside the input (the session carries none; --floorplan names another)"
     return sequence
 
 

@@ -5,7 +5,7 @@
   floorplan, input frames and the outputs logged per frame (reader.py).
 - record_session: the localizer loop with logging, as every recorder should run it.
 - replay: re-runs the engine on a session's inputs and compares or rewrites (replay.py).
-Topics and schemas: schemas.py (DESIGN.md table).
+Topics and schemas: schemas.py (docs/inputs.md table).
 """
 
 from .reader import FrameRecord, LoggedOutputs, Session, read_session

@@ -57,6 +57,7 @@ class ReplayResult:
     out: Path | None = None
     tolerance: Tolerance = EXACT
     deviations: dict[str, Deviation] = field(default_factory=dict)  # per topic, with check=True
+    unchecked: list[int] = field(default_factory=list)  # with check: frames replayed without logged outputs (a cut-off end)
 
 
 # --- settings -------------------------------------------------------------------------------
@@ -158,6 +159,7 @@ def replay_session(
     divergence = None
     checked = 0
     frames = 0
+    unchecked: list[int] = []
     comparison = Comparison(tolerance)
     try:
         for rec in session.records(0 if check else start, stop):
@@ -176,6 +178,8 @@ def replay_session(
                 divergence = compare_outputs(comparison, rec.index, rec.stamp_ns, rec.outputs, est, localizer)
                 if divergence is not None:
                     break
+            elif check:
+                unchecked.append(rec.index)
     finally:
         localizer.close()  # the logged pipeline mode may have started a worker
         if writer is not None:
@@ -194,6 +198,7 @@ def replay_session(
         out=None if out is None else Path(out),
         tolerance=tolerance,
         deviations=comparison.deviations,
+        unchecked=unchecked,
     )
 
 

@@ -1,4 +1,4 @@
-"""Message <-> numpy conversion for the session topics (DESIGN.md table).
+"""Message <-> numpy conversion for the session topics (docs/inputs.md table).
 
 Every function here is pure: no file, no clock. Decoders validate what they read and
 raise SessionLogError naming the field that is wrong; the reader adds the file and topic.

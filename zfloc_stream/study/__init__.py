@@ -22,6 +22,6 @@ from .plan import Cell, STUDY_BASE, cell_settings, chunk_starts, parse_lengths, 
 from .cells import run_cell, threshold_key
 from .resume import CELLS_FILE, MANIFEST_FILE, check_manifest, load_finished
 from .runner import run_study
-from .report import StudyOutcome, dataset_label, markdown_table, plot_sr_vs_length, summarize_rows, write_outputs
+from .report import StudyOutcome, dataset_label, dataset_labels, markdown_table, plot_sr_vs_length, summarize_rows, write_outputs
 
-__all__ = ["CELLS_FILE", "Cell", "MANIFEST_FILE", "STUDY_BASE", "StudyOutcome", "cell_settings", "check_manifest", "chunk_starts", "dataset_label", "load_finished", "markdown_table", "parse_lengths", "plan_cells", "plot_sr_vs_length", "run_cell", "run_study", "summarize_rows", "threshold_key", "user_overrides", "write_outputs"]
+__all__ = ["CELLS_FILE", "Cell", "MANIFEST_FILE", "STUDY_BASE", "StudyOutcome", "cell_settings", "check_manifest", "chunk_starts", "dataset_label", "dataset_labels", "load_finished", "markdown_table", "parse_lengths", "plan_cells", "plot_sr_vs_length", "run_cell", "run_study", "summarize_rows", "threshold_key", "user_overrides", "write_outputs"]

@@ -4,7 +4,7 @@ results.json, the markdown table shaped like the paper's, the SR-vs-length plot.
 from __future__ import annotations
 
 import json
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,11 +30,25 @@ class StudyOutcome:
         return self.ran / self.seconds if self.seconds > 0 else float("nan")
 
 
-def dataset_label(spec: str) -> str:
-    """'carmen:/data/intel.log.gz' -> 'carmen:intel.log.gz' (tables stay narrow)."""
+def dataset_label(spec: str, depth: int = 1) -> str:
+    """'carmen:/data/intel.log.gz' -> 'carmen:intel.log.gz' (tables stay narrow); depth:
+    how many trailing path parts to keep."""
     kind, _, rest = spec.partition(":")
-    parts = [Path(p).name or p for p in rest.split(",")]
+    parts = ["/".join(Path(p).parts[-depth:]) or p for p in rest.split(",")]
     return f"{kind}:{','.join(parts)}"
+
+
+def dataset_labels(specs) -> dict[str, str]:
+    """Each spec's label, unique among specs: two sessions both named session.mcap get as
+    many parent folders as tell them apart ('mcap:fhw/session.mcap', 'mcap:aces/session.mcap')."""
+    specs = list(dict.fromkeys(specs))
+    labels = {spec: dataset_label(spec) for spec in specs}
+    for depth in range(2, 64):
+        taken = Counter(labels.values())
+        clashing = [spec for spec in specs if taken[labels[spec]] > 1]
+        for spec in clashing:  # the whole spec once its parts are used up (one file spelt two ways)
+            labels[spec] = dataset_label(spec, depth) if depth < 63 else spec
+    return labels
 
 
 def _spread(values) -> dict:
@@ -60,6 +74,7 @@ def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
             errors[key] += 1
         groups[key][row["seed"]].append(row)
     summary = []
+    labels = dataset_labels(key[0] for key in groups)
     for (dataset, length), by_seed in sorted(groups.items(), key=lambda kv: (kv[0][0], -kv[0][1])):
         per_seed = []
         for seed, seed_rows in sorted(by_seed.items()):
@@ -70,7 +85,7 @@ def summarize_rows(rows: list[dict], settings: Settings) -> list[dict]:
         summary.append(
             {
                 "dataset": dataset,
-                "label": dataset_label(dataset),
+                "label": labels[dataset],
                 "length": length,
                 "n_seeds": len(per_seed),
                 "n_runs": sum(s.n_runs for s in per_seed),
@@ -108,13 +123,14 @@ def markdown_table(summary: list[dict], lengths: Sequence[int], thresholds: Sequ
     ref = f"{REFERENCE_THRESHOLD:g}" if REFERENCE_THRESHOLD in thresholds else f"{thresholds[0]:g}"
     by = {(s["dataset"], s["length"]): s for s in summary}
     datasets = list(dict.fromkeys(s["dataset"] for s in summary))
+    labels = dataset_labels(datasets)
     head = [f"SR@{ref}m #{L} (%)" for L in lengths] + [f"RMSE_succ #{longest} (m)", f"RMSE_all #{longest} (m)"]
     lines = ["| Dataset | " + " | ".join(head) + " |", "|---" * (len(head) + 1) + "|"]
     for d in datasets:
         cells = [_pct(by[(d, L)]["success_rate"][ref]) if (d, L) in by else "--" for L in lengths]
         s = by.get((d, longest))
         cells += ["--"] * 2 if s is None else [_metres(s["rmse_succ"]), _metres(s["rmse_all"])]
-        lines.append(f"| {dataset_label(d)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {labels[d]} | " + " | ".join(cells) + " |")
     lines += ["", "| Dataset | length | runs | " + " | ".join(f"SR@{t:g}m (%)" for t in thresholds) + " | no pose | errors |"]
     lines.append("|---" * (len(thresholds) + 5) + "|")
     for d in datasets:
@@ -123,7 +139,7 @@ def markdown_table(summary: list[dict], lengths: Sequence[int], thresholds: Sequ
             if s is None:
                 continue
             srs = " | ".join(_pct(s["success_rate"][f"{t:g}"]) for t in thresholds)
-            lines.append(f"| {dataset_label(d)} | {L} | {s['n_runs']} | {srs} | {s['n_no_pose']} | {s['n_errors']} |")
+            lines.append(f"| {labels[d]} | {L} | {s['n_runs']} | {srs} | {s['n_no_pose']} | {s['n_errors']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -135,6 +151,7 @@ def plot_sr_vs_length(summary: list[dict], thresholds: Sequence[float], path: Pa
 
     fig, ax = plt.subplots(figsize=(6, 4))
     datasets = list(dict.fromkeys(s["dataset"] for s in summary))
+    labels = dataset_labels(datasets)
     all_lengths = sorted({s["length"] for s in summary})
     # Thresholds often give the same SR (every success within 0.5 m): each (dataset,
     # threshold) line gets its own colour, marker and line style, and a small sideways
@@ -152,7 +169,7 @@ def plot_sr_vs_length(summary: list[dict], thresholds: Sequence[float], path: Pa
             std = [100 * s["success_rate"][f"{t:g}"]["std"] for s in rows]
             std = [v if np.isfinite(v) else 0.0 for v in std]
             ax.errorbar(x, mean, yerr=std, fmt=styles[j % len(styles)], color=f"C{k % 10}", capsize=3, mfc="none" if j else None,
-                        label=f"{dataset_label(d)} @{t:g} m")
+                        label=f"{labels[d]} @{t:g} m")
     ax.set_xlabel("sequence length (frames)")
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-2, 102)

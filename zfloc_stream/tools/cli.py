@@ -111,12 +111,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--input", type=Path, required=True, help="session.mcap, a ROS 2 bag (.mcap), a Gibson(t) scene folder, or a Carmen log")
     run.add_argument("--groundtruth", type=Path, metavar="FILE", help="ground truth for any input: a TUM file (matched by "
                      "timestamp) or a CSV with x,y,theta columns (+ frame or timestamp; else one row per input frame); "
-                     "replaces the input's own")
+                     "replaces the input's own where it has a pose; a warning says how many frames it covers")
     run.add_argument("--scans", metavar="START:STOP", help="localize input frames [START, STOP) only (0-based; for a Carmen "
                      "log the scans map-from-log --exclude START:STOP leaves out)")
     run.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
                      help="ROS 2 bags: the topic for a role (scan, depth, camera_info, odom, tf, tf_static), e.g. scan=/front/scan")
-    run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
+    run.add_argument("--odometry-noise", type=float, default=None, metavar="FRAC", help="synthetic odometry drift for Carmen logs and Gibson(t) scenes, refused for MCAP inputs (recorded odometry) (default: datasets.odometry.noise = 0.02 plus 5 mm / 0.3 deg per step; 0 = exact relative motion)")
     run.add_argument("--out", type=Path, default=Path("zfloc-run"), help="output folder (default ./zfloc-run)")
     run.add_argument("--depth-model", metavar="ID_OR_DIR", help="metric depth network for RGB frames: a local folder or a "
                      "Hugging Face hub id in the local cache (sets backbones.depth_model; needs the [torch] extra)")
@@ -138,9 +138,18 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--tum", type=Path, required=True, metavar="PATH", help="TUM file to write")
     export.add_argument("--salvage", action="store_true", help="a session cut off by a crash (or damaged): read it as far as its intact chunks go")
 
-    config = sub.add_parser("config", help="print the settings (defaults, or a file with overrides) as YAML")
-    config.add_argument("--config", type=Path, help="YAML settings file")
-    config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    config = sub.add_parser(
+        "config",
+        help="print the settings (defaults, or a file with overrides) as YAML",
+        description="Print the settings as YAML: the defaults, updated by --config then --set. Edit the output "
+        "and pass it back with --config to any command.",
+        epilog="examples:\n  zfloc-stream config > my.yaml                    # the defaults, to edit\n"
+        "  zfloc-stream config --config my.yaml --set seed=3  # what a run with these overrides would use\n"
+        "  zfloc-stream run --config my.yaml --input session.mcap --out out/",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    config.add_argument("--config", type=Path, help="YAML settings file (overrides the defaults)")
+    config.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override one setting, e.g. estimator.ransac.iterations=300")
 
     from .map_from_log import register as register_map_from_log
 
@@ -232,6 +241,11 @@ def cmd_demo(args) -> int:
             scene.floorplan, _paced(args, iter(sequence)), settings, args.out, total=args.frames,
             progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum, live=live, ros2=args.ros2,
         )
+        if groundtruth is not None and outcome.estimates:  # a file that covers only part of the input (or none) is said
+            note = groundtruth.coverage_note(len(outcome.estimates), outcome.truth_from_file, outcome.truth_kept, start,
+                                             (outcome.estimates[0].timestamp, outcome.estimates[-1].timestamp))
+            if note:
+                print_warning(note)
         _report(outcome, settings)
         _linger(args, live)
     finally:
@@ -285,6 +299,8 @@ def cmd_run(args) -> int:
             raise InputError(f"--scans {args.scans}: {args.input} has only {sequence.n_frames} frames")
         stop = min(stop, sequence.n_frames)
     print(_topics_line(args, sequence) + (f"; frames {start}-{stop - 1} of {sequence.n_frames}" if window else f"; {sequence.n_frames} frames"), flush=True)
+    if floorplan is None and sequence.floorplan_source:
+        print(f"floorplan: {sequence.floorplan_source}", flush=True)
     if floorplan is None and sequence.source.startswith("carmen:"):
         if window is not None:
             print_warning(f"no --floorplan: the map is built from this log without scans {start}-{stop - 1} "
@@ -315,40 +331,17 @@ def cmd_run(args) -> int:
 
 
 def _report(outcome, settings) -> None:
-    import numpy as np
-
     from ..tum import moved_note
+    from .run_summary import report_lines
 
-    last = outcome.estimates[-1] if outcome.estimates else None
     extra = "".join(f", {p.name}" for p in (outcome.truth_tum_path, outcome.ros2_path) if p is not None)
     print(f"wrote {outcome.out_dir}/trajectory.csv, overlay.png, session.mcap{extra} ({len(outcome.estimates)} frames); "
           f"TUM: {outcome.tum_path} ({outcome.tum_rows} poses)")
     note = moved_note(outcome.tum_path, outcome.tum_moved, outcome.tum_rows)
     if note:
         print(f"note: {note}")
-    if last is None:
-        return
-    if last.pose is None:
-        print(f"final status: {last.status}, no pose yet ({len(outcome.estimates)} frames: too few for a first estimate)")
-    else:
-        print(f"final status: {last.status}, score {last.score:.3f}, scale {last.scale:.3f}")
-    threshold = settings.logging.success_distance
-    summary = outcome.error_summary(threshold)
-    if summary is None:
-        return
-    if summary.posed:
-        print(f"position error over {summary.posed} posed frames with ground truth: mean {summary.mean:.2f} m, "
-              f"median {summary.median:.2f} m, max {summary.max:.2f} m; {summary.off} frames more than {threshold:g} m off"
-              + (f"; {summary.frames - summary.posed} frames without a pose" if summary.frames > summary.posed else ""))
-    else:
-        print(f"position error: no pose yet on any of the {summary.frames} frames with ground truth")
-    print(f"frames within {threshold:g} m by status: " + ", ".join(f"{status} {k}/{n}" for status, (k, n) in summary.by_status.items()))
-    errors = outcome.final_errors()
-    if errors is not None and last.pose is not None:
-        ok = bool((errors <= threshold).all())
-        missing = int((~np.isfinite(errors)).sum())
-        tail = f"last-{len(errors)} max {errors.max():.3f} m" if not missing else f"{missing} of the last {len(errors)} frames without a pose"
-        print(f"final position error: {errors[-1]:.3f} m; {tail}; success@{threshold:g}m: {'yes' if ok else 'no'}")
+    for line in report_lines(outcome, settings.logging.success_distance):
+        print(line)
 
 
 def cmd_export(args) -> int:

@@ -96,6 +96,21 @@ def _summary_table(result, success_distance: float) -> str:
     return "\n".join(lines)
 
 
+def _checked_text(result, start: int, last: int) -> str:
+    """'N frames checked (A-B)', and which replayed frames had no logged outputs to check."""
+    skipped = result.unchecked
+    if not skipped:
+        return f"{result.checked} frames checked ({start}-{last})"
+    if skipped == list(range(last - len(skipped) + 1, last + 1)):  # a cut-off end: the file stops before their outputs
+        end = last - len(skipped)
+        checked = f"{result.checked} frames checked ({start}-{end})" if result.checked else "no frame checked"
+        tail = f"frame {last}" if len(skipped) == 1 else f"frames {skipped[0]}-{last}"
+        return f"{checked}; {tail} replayed but not checked: the file ends before their logged outputs"
+    shown = ", ".join(map(str, skipped[:5])) + (", ..." if len(skipped) > 5 else "")
+    return (f"{result.checked} of the {result.frames} frames {start}-{last} checked; {len(skipped)} without logged "
+            f"outputs replayed but not checked (frames {shown})")
+
+
 def run(args) -> int:
     from ..plan_loading import load_floorplan
     from ..session import read_session
@@ -159,8 +174,7 @@ def run(args) -> int:
             verdict = "identical"
         else:
             verdict = f"same decisions, numbers within {tolerance}"
-        print(f"{verdict}: {result.checked} frames checked ({args.start}-{last}), "
-              "pose, hypotheses, BEV and status (timings excluded) match the log")
+        print(f"{verdict}: {_checked_text(result, args.start, last)}, pose, hypotheses, BEV and status (timings excluded) match the log")
         print("largest deviation per topic:")
         for topic in sorted(result.deviations):
             print(f"  {topic}: {result.deviations[topic]}")

@@ -5,6 +5,7 @@ and overlay.png; optionally ros2.mcap (ROS 2 messages) and a live Foxglove view.
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,7 @@ class ErrorSummary:
     mean: float
     median: float
     max: float
+    rmse: float  # sqrt(mean(error^2)): evo_ape's translation RMSE (ATE, no alignment) on the same frames
     off: int  # posed frames farther than the threshold
     by_status: dict[str, tuple[int, int]]  # status -> (frames within the threshold, frames)
 
@@ -51,6 +53,11 @@ class SessionOutcome:
     tum_moved: int = 0  # rows written at a moved stamp (repeated input stamps)
     truth_tum_path: Path | None = None
     ros2_path: Path | None = None
+    first_index: int = 0  # input frame number of estimates[0]
+    seconds: float = 0.0  # wall time of the frame loop (reading, localizing, writing)
+    push_seconds: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  # per frame: Localizer.push alone
+    truth_from_file: int | None = None  # frames whose truth came from --groundtruth (None: no file given)
+    truth_kept: int = 0  # frames the file had no pose for that kept the input's own truth
 
     @property
     def poses(self) -> np.ndarray:
@@ -88,7 +95,7 @@ class SessionOutcome:
                 by_status[status] = (int((errors[mask] <= threshold).sum()), int(mask.sum()))
         stat = (lambda f: float(f(posed))) if posed.size else (lambda f: float("nan"))
         return ErrorSummary(threshold, int(known.sum()), int(posed.size), stat(np.mean), stat(np.median), stat(np.max),
-                            int((posed > threshold).sum()), by_status)
+                            float(np.sqrt(np.mean(posed**2))) if posed.size else float("nan"), int((posed > threshold).sum()), by_status)
 
 
 def run_session(
@@ -108,8 +115,9 @@ def run_session(
 ) -> SessionOutcome:
     """perception: networks that complete RGB camera frames before they are logged, so the
     session holds their depth and labels and replays without them. groundtruth: a
-    groundtruth.GroundTruth that replaces the frames' own truth (looked up at input frame
-    number first_index + i and at the trajectory.tum stamp). live: a tools.live.LiveServer
+    groundtruth.GroundTruth that replaces the frames' own truth where it has a pose (looked
+    up at input frame number first_index + i and at the trajectory.tum stamp; a frame it
+    has none for keeps its own, counted in SessionOutcome.truth_kept). live: a tools.live.LiveServer
     fed every record written to session.mcap. ros2: also write OUT/ros2.mcap."""
     from contextlib import ExitStack
 
@@ -123,6 +131,9 @@ def run_session(
     truths: list = []
     drops = DropCounter(description)  # frames the localizer refused: warned once per cause
     lookup = TumStamps()  # the stamps trajectory.tum will carry: ground truth is looked up at them
+    push_seconds: list[float] = []
+    from_file = kept = 0
+    t_start = time.perf_counter()
     with ExitStack() as stack:
         stack.enter_context(localizer)  # stops a pipelined round worker, also when a frame source fails
         csv_writer = stack.enter_context(TrajectoryCsvWriter(out_dir / "trajectory.csv"))
@@ -138,9 +149,16 @@ def run_session(
         for index, frame in enumerate(frames):
             stamp = lookup.next(frame.timestamp)
             if groundtruth is not None:
-                frame = dataclasses.replace(frame, ground_truth=groundtruth.at(first_index + index, stamp))
+                given = groundtruth.at(first_index + index, stamp)
+                if given is not None:
+                    frame = dataclasses.replace(frame, ground_truth=given)
+                    from_file += 1
+                elif frame.ground_truth is not None:  # a file that does not cover the frame drops no truth
+                    kept += 1
             frame = log.write_frame(index, frame)  # push the frame as logged: replays match bit for bit
+            t0 = time.perf_counter()
             est = localizer.push(frame)
+            push_seconds.append(time.perf_counter() - t0)
             log.write_estimate(est, localizer)
             csv_writer.write(est)
             tum_writer.write(est)
@@ -152,6 +170,7 @@ def run_session(
             estimates.append(est)
             truths.append(frame.ground_truth)
             bar.update()
+        seconds = time.perf_counter() - t_start
     drops.summary()
     truth = None
     if any(t is not None for t in truths):
@@ -160,7 +179,8 @@ def run_session(
     if truth_writer.rows == 0:
         truth_tum.unlink(missing_ok=True)
     outcome = SessionOutcome(estimates, truth, out_dir, tum_writer.path, tum_writer.rows, tum_writer.moved,
-                             truth_tum if truth_writer.rows else None, None if ros2_writer is None else ros2_writer.path)
+                             truth_tum if truth_writer.rows else None, None if ros2_writer is None else ros2_writer.path,
+                             first_index, seconds, np.array(push_seconds), None if groundtruth is None else from_file, kept)
     best = localizer.tracker.best
     obs = localizer.last_observation
     save_overlay(
@@ -172,5 +192,6 @@ def run_session(
         alignment=None if best is None else best.alignment,
         title=f"{description}: {len(estimates)} frames, final status {estimates[-1].status if estimates else '-'}",
         statuses=[e.status for e in estimates],
+        alignments=[e.alignment for e in estimates],
     )
     return outcome
