@@ -17,10 +17,10 @@ everything a floorplan computes on construction), then the RANSAC per-plan table
 --large S: a S x S m floor of the same kind drawn at 0.05 m (a raster of (S/0.05)^2 cells),
 loaded with the default settings as a ROS map (pooled to floorplan.max_cells when larger):
 load time of the plan and of the estimator's tables on first use, and the process's peak
-memory (ru_maxrss, the whole process: imports, kernels, the image). --log L places the
-map of the whole Carmen log L (../shared/data/carmen/) into the floor's corner, walls of
-the generated rooms cleared under it, and plays the log's first --frames scans (drifting
-odometry, fixed scale) on the whole plan: the share of `tracking` frames and their error.
+memory (ru_maxrss, the whole process: imports, kernels, the image). --log L: the floor is
+instead the whole-log maps of the shared Carmen logs (../shared/data/carmen/) tiled over
+it, L's own map once in its corner (large_plan), and L's first --frames scans (drifting
+odometry, fixed scale) are played on the whole plan: `tracking` frames and their error.
 """
 
 from __future__ import annotations
@@ -94,34 +94,55 @@ def timed(fn):
 
 
 def large_plan(size: float, seed: int, out: Path, settings, log: str | None):
-    """(map YAML, the Carmen log's path or None) of a size x size m floor at 0.05 m, the
-    log's whole map pasted at its own coordinates in the floor's corner."""
+    """(map YAML, the Carmen log's path or None) of a size x size m floor at 0.05 m: rooms
+    along corridors (building_segments), or with `log` the whole-log maps of the shared
+    Carmen logs tiled over it (real walls and clutter everywhere, as one map of a large
+    building would have): the log's own map once, at its own coordinates in the corner,
+    the other logs' maps (turned by quarter turns in turn) filling the rest row by row."""
     global WIDTH, HEIGHT
-    WIDTH = HEIGHT = size
-    segments, pillars = building_segments(seed)
     res, margin = 0.05, 1.0
     n = int(round((size + 2 * margin) / res))
-    img = np.zeros((n, n), dtype=np.uint8)
-    ends = np.round((segments + margin) / res).astype(np.int32)
-    for a, b in ends:
-        cv2.line(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, 2)
-    for x, y, r in pillars:
-        cv2.circle(img, (int((x + margin) / res), int((y + margin) / res)), max(1, int(r / res)), 1, -1)
+    img = np.zeros((n, n), dtype=bool)
     origin = np.array([-margin, -margin])
-    path = None
-    if log is not None:
+    if log is None:
+        WIDTH = HEIGHT = size
+        segments, pillars = building_segments(seed)
+        canvas = np.zeros((n, n), dtype=np.uint8)
+        for a, b in np.round((segments + margin) / res).astype(np.int32):
+            cv2.line(canvas, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, 2)
+        for x, y, r in pillars:
+            cv2.circle(canvas, (int((x + margin) / res), int((y + margin) / res)), max(1, int(r / res)), 1, -1)
+        img = canvas.astype(bool)
+        path = None
+    else:
         from zfloc_stream.datasets.carmen import load_log
         from zfloc_stream.mapping import map_from_log
 
-        path = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen" / f"{log}-corrected.log.gz"
-        small = map_from_log(load_log(path, settings), [], settings, resolution=res)
-        h, w = small.shape
-        at = (20, 20)  # cells from the floor's corner
-        img[at[0] - 20 : at[0] + h + 20, at[1] - 20 : at[1] + w + 20] = 0  # the generated rooms under it go
-        img[at[0] : at[0] + h, at[1] : at[1] + w] = small.occupied
-        origin = small.origin - np.array(at[::-1]) * res  # the log's coordinates are the plan's
+        data = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+        path = data / f"{log}-corrected.log.gz"
+        maps = {name: map_from_log(load_log(data / f"{name}-corrected.log.gz", settings), [], settings, resolution=res).occupied
+                for name in ("intel", "aces", "belgioioso", "fhw", "orebro")}
+        own = maps.pop(log)
+        others = list(maps.values())
+        gap, at = 20, (20, 20)  # cells between tiles; the own map's corner
+        img[at[0] : at[0] + own.shape[0], at[1] : at[1] + own.shape[1]] = own
+        origin = map_from_log(load_log(path, settings), [], settings, resolution=res).origin - np.array(at[::-1]) * res
+        row, col, shelf, k = at[0], at[1] + own.shape[1] + gap, own.shape[0], 0
+        while True:
+            tile = np.rot90(others[k % len(others)], k // len(others))
+            if col + tile.shape[1] > n:  # next shelf
+                row, col, shelf = row + shelf + gap, gap, 0
+                if row + tile.shape[0] > n:
+                    break
+            if row + tile.shape[0] <= n:
+                img[row : row + tile.shape[0], col : col + tile.shape[1]] = tile
+                shelf = max(shelf, tile.shape[0])
+            col += tile.shape[1] + gap
+            k += 1
+            if k > 400:
+                break
     occ = Floorplan.__new__(Floorplan)  # only write_ros's fields: the raster is written, not built
-    occ.occupied, occ.origin, occ.resolution = img.astype(bool), origin, res
+    occ.occupied, occ.origin, occ.resolution = img, origin, res
     return Floorplan.write_ros(occ, out, "large"), path
 
 
