@@ -12,6 +12,15 @@ everything a floorplan computes on construction), then the RANSAC per-plan table
     python benchmarks/bench_plan_load.py                 # goal: DXF <= 5 s, raster <= 3 s
     python benchmarks/bench_plan_load.py --keep plan/    # keep the generated files
     python benchmarks/bench_plan_load.py --set floorplan.max_triplets=500000
+    python benchmarks/bench_plan_load.py --large 300 --log fhw   # issue 43: a 300 x 300 m raster
+
+--large S: a S x S m floor of the same kind drawn at 0.05 m (a raster of (S/0.05)^2 cells),
+loaded with the default settings as a ROS map (pooled to floorplan.max_cells when larger):
+load time of the plan and of the estimator's tables on first use, and the process's peak
+memory (ru_maxrss, the whole process: imports, kernels, the image). --log L: the floor is
+instead the whole-log maps of the shared Carmen logs (../shared/data/carmen/) tiled over
+it, L's own map once in its corner (large_plan), and L's first --frames scans (drifting
+odometry, fixed scale) are played on the whole plan: `tracking` frames and their error.
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import cv2
 import ezdxf
 import numpy as np
 
@@ -83,16 +93,115 @@ def timed(fn):
     return value, (time.perf_counter() - t0, time.process_time() - c0)
 
 
+def large_plan(size: float, seed: int, out: Path, settings, log: str | None):
+    """(map YAML, the Carmen log's path or None) of a size x size m floor at 0.05 m: rooms
+    along corridors (building_segments), or with `log` the whole-log maps of the shared
+    Carmen logs tiled over it (real walls and clutter everywhere, as one map of a large
+    building would have): the log's own map once, at its own coordinates in the corner,
+    the other logs' maps (turned by quarter turns in turn) filling the rest row by row."""
+    global WIDTH, HEIGHT
+    res, margin = 0.05, 1.0
+    n = int(round((size + 2 * margin) / res))
+    img = np.zeros((n, n), dtype=bool)
+    origin = np.array([-margin, -margin])
+    if log is None:
+        WIDTH = HEIGHT = size
+        segments, pillars = building_segments(seed)
+        canvas = np.zeros((n, n), dtype=np.uint8)
+        for a, b in np.round((segments + margin) / res).astype(np.int32):
+            cv2.line(canvas, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, 2)
+        for x, y, r in pillars:
+            cv2.circle(canvas, (int((x + margin) / res), int((y + margin) / res)), max(1, int(r / res)), 1, -1)
+        img = canvas.astype(bool)
+        path = None
+    else:
+        from zfloc_stream.datasets.carmen import load_log
+        from zfloc_stream.mapping import map_from_log
+
+        data = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+        path = data / f"{log}-corrected.log.gz"
+        maps = {name: map_from_log(load_log(data / f"{name}-corrected.log.gz", settings), [], settings, resolution=res).occupied
+                for name in ("intel", "aces", "belgioioso", "fhw", "orebro")}
+        own = maps.pop(log)
+        others = list(maps.values())
+        gap, at = 20, (20, 20)  # cells between tiles; the own map's corner
+        img[at[0] : at[0] + own.shape[0], at[1] : at[1] + own.shape[1]] = own
+        origin = map_from_log(load_log(path, settings), [], settings, resolution=res).origin - np.array(at[::-1]) * res
+        row, col, shelf, k = at[0], at[1] + own.shape[1] + gap, own.shape[0], 0
+        while True:
+            tile = np.rot90(others[k % len(others)], k // len(others))
+            if col + tile.shape[1] > n:  # next shelf
+                row, col, shelf = row + shelf + gap, gap, 0
+                if row + tile.shape[0] > n:
+                    break
+            if row + tile.shape[0] <= n:
+                img[row : row + tile.shape[0], col : col + tile.shape[1]] = tile
+                shelf = max(shelf, tile.shape[0])
+            col += tile.shape[1] + gap
+            k += 1
+            if k > 400:
+                break
+    occ = Floorplan.__new__(Floorplan)  # only write_ros's fields: the raster is written, not built
+    occ.occupied, occ.origin, occ.resolution = img, origin, res
+    return Floorplan.write_ros(occ, out, "large"), path
+
+
+def large_main(args, settings, out: Path) -> int:
+    import resource
+
+    from zfloc_stream.estimation.correlative import _near_wall_mask
+    from zfloc_stream.estimation.scoring import floorplan_scorer
+
+    yaml_path, log_path = large_plan(args.large, args.seed, out, settings, args.log)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
+    plan, t_load = timed(lambda: Floorplan.load(yaml_path, settings=settings))
+    _, t_tables = timed(lambda: (floorplan_scorer(plan, settings.estimator.scoring), floorplan_matches(plan, settings.estimator.solvers),
+                                 _near_wall_mask(plan, settings.estimator.correlative.cell, settings.estimator.correlative.tolerance)))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
+    h, w = plan.shape
+    print(f"plan: {args.large:.0f} x {args.large:.0f} m at 0.05 m -> kept {w} x {h} cells at {plan.resolution:g} m "
+          f"({len(plan.lines)} lines, {len(plan.circles)} circles)")
+    print("| step | wall s | CPU s |\n|---|---|---|")
+    print(f"| Floorplan.load (image, pooling, field, primitives) | {t_load[0]:.2f} | {t_load[1]:.2f} |")
+    print(f"| estimator tables (scorer, RANSAC, correlative mask) | {t_tables[0]:.2f} | {t_tables[1]:.2f} |")
+    print(f"| total | {t_load[0] + t_tables[0]:.2f} | {t_load[1] + t_tables[1]:.2f} |")
+    print(f"peak RSS of the process: {peak:.0f} MiB ({before:.0f} MiB before the load: imports, kernels, the generated image)")
+    if log_path is None:
+        return 0
+    from zfloc_stream.datasets.carmen import carmen_sequence
+    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.metrics import position_errors
+
+    run = load_settings(overrides=args.set, base_overrides={"estimator": {"scale_mode": "fixed"}})
+    seq = carmen_sequence(log_path, run)
+    frames = list(seq.frames(0, min(args.frames, seq.n_frames)))
+    localizer = Localizer(plan, run)
+    estimates = [localizer.push(f) for f in frames]
+    localizer.close()
+    errors = position_errors([e.pose for e in estimates], np.array([f.ground_truth for f in frames]))
+    tracking = np.array([e.status == "tracking" for e in estimates])
+    first = int(np.argmax(tracking)) if tracking.any() else None
+    print(f"{args.log}: {len(frames)} scans on the {args.large:.0f} m plan: first `tracking` at frame {first}, "
+          f"{tracking.sum()} tracking frames, {np.mean(errors[tracking] < 1.0) * 100 if tracking.any() else 0:.1f}% of them within 1 m, "
+          f"last 10 frames within 1 m: {bool(np.all(errors[-10:] < 1.0))}, peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10:.0f} MiB")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--keep", type=Path, help="write the plan files here (default: a temporary folder)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="settings override, e.g. floorplan.max_triplets=500000")
+    parser.add_argument("--large", type=float, metavar="S", help="instead: a S x S m raster at 0.05 m, default settings (issue 43)")
+    parser.add_argument("--log", help="with --large: a Carmen log whose map is placed in the plan and whose scans are played on it")
+    parser.add_argument("--frames", type=int, default=150, help="with --log: scans played")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         out = args.keep if args.keep is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
+        if args.large:
+            return large_main(args, load_settings(overrides=args.set), out)
         segments, pillars = building_segments(args.seed)
         dxf = write_dxf(segments, pillars, out / "building.dxf")
         settings = load_settings(overrides=args.set)

@@ -33,6 +33,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
     python benchmarks/eval_real.py --plan-style --camera --windows 2   # against the maps drawn as plans
     python benchmarks/eval_real.py --plan-style two-face                # plans with both faces of each wall
     python benchmarks/eval_real.py --plan-style two-face-centred       # both faces 0.1 m about each seen wall
+    python benchmarks/eval_real.py --wrong-map --lengths 20,50 --windows 1   # every input on every OTHER building's map (wrong_map.py)
 """
 
 from __future__ import annotations
@@ -620,6 +621,8 @@ def main(argv=None) -> int:
                         help="localize against each held-out map redrawn as an architect's DXF plan (one line per wall, "
                              "two-face: both faces of each wall, the wall behind the face the sensor saw; two-face-centred: "
                              "faces 0.1 m either side of it), beside the raster map on the same windows")
+    parser.add_argument("--wrong-map", action="store_true",
+                        help="instead: every shared camera session and laser window against every other shared building's map (wrong_map.py)")
     add_condition_options(parser)
     args = parser.parse_args(argv)
     conditions = parse_conditions(parser, args)
@@ -646,6 +649,19 @@ def main(argv=None) -> int:
                 for camera in [False] * (not args.no_laser) + [True] * args.camera:
                     jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
+    if args.wrong_map:
+        import wrong_map
+
+        runs = [(wrong_map.session_row, (s, m, args.seed, args.set)) for s in wrong_map.sessions() for m in wrong_map.sessions()
+                if s != m and args.camera] if args.camera else []
+        runs += [(wrong_map.laser_row, (j[0], j[1], j[2], other, args.seed, args.set, DATA)) for j in jobs if not j[6]
+                 for other in logs if other != j[0]]
+        rows = [fn(*a) for fn, a in runs]
+        print(wrong_map.table(rows))
+        print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
+        return 0
     if args.plan_style:
         status = plan_style_main(args, jobs, lengths)
         print(f"\n{len(jobs)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)

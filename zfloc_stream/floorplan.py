@@ -20,6 +20,7 @@ Reading a raster plan's files and their checks: raster_files.py.
 from __future__ import annotations
 
 from functools import cached_property
+import warnings
 from pathlib import Path
 
 import cv2
@@ -40,7 +41,9 @@ from .raster_files import (
     check_origin,
     check_plan_budget,
     check_resolution,
+    coarsening,
     image_size,
+    pooled,
     read_gray,
     read_map_yaml,
     short_repr,
@@ -124,6 +127,15 @@ class Floorplan:
         self.settings = settings if settings is not None else Settings()
         self.name = name
         check_plan_budget(occ.shape, self.resolution, self.settings, f"floorplan {name!r}")
+        k = coarsening(occ.shape, self.settings)
+        if k > 1:  # a large building: coarser cells keep its memory and load time bounded
+            h, w = occ.shape
+            occ = pooled(np.asarray(occ, dtype=bool), k)
+            warnings.warn(f"floorplan {name!r}: {w}x{h} cells at {self.resolution:g} m is more than floorplan.max_cells = "
+                          f"{self.settings.floorplan.max_cells:,}: localizing on {k * self.resolution:g} m cells "
+                          f"({occ.shape[1]}x{occ.shape[0]}); --set floorplan.max_cells={h * w} keeps every cell "
+                          f"(~60 bytes each while the plan is built)", stacklevel=2)
+            self.resolution *= k
         extent = self.origin + np.array(occ.shape[::-1]) * self.resolution
         if np.abs(extent).max() > MAX_COORDINATE:
             raise FloorplanError(f"floorplan {name!r}: the plan reaches {np.abs(extent).max():.3g} m from 0: not a place on Earth")

@@ -37,6 +37,7 @@ from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import RollingBEV
 from .kidnap_test import KidnapTest, Verdict, better_place
+from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
@@ -74,6 +75,7 @@ class Localizer:
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
         self.rounds = RoundScheduler(floorplan, self.settings)
         self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
+        self.map_match = MapMatch(floorplan, self.settings.localizer, self.settings.tracking)
         self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         if self.settings.localizer.odometry_scale == "metric" and not self.local.metric_odometry:
             # measured: monocular camera windows at a free scale 60% against 92% at the prior
@@ -301,9 +303,11 @@ class Localizer:
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         if self._kidnap is not None and alignment is not None:
             consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
-        status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
+        explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
+        status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent, explained)
         if shown is not self.tracker and status == "tracking":
             status = self.tracker.status  # a preview is one round on fewer frames: never a promise
+        self.map_match.note(explained, status)
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose
             first = alternatives[0]

@@ -1,7 +1,8 @@
 """Reading a raster plan's files, with every check made before anything large is
 allocated: a ROS map_server YAML (keys, resolution, origin, thresholds) and its image, or a
 bare image; the image's size is read from its header and held against
-floorplan.max_cells before it is decoded, a damaged image is named by Pillow before
+floorplan.max_image_cells before it is decoded (a plan over floorplan.max_cells is then
+pooled to coarser cells: coarsening, pooled), a damaged image is named by Pillow before
 OpenCV decodes it, and coordinates farther than MAX_COORDINATE from 0 are refused."""
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ _PIL_LOCK = threading.Lock()
 @contextlib.contextmanager
 def pillow():
     """Pillow's Image with its decompression-bomb guard off (our own budget applies,
-    floorplan.max_cells), for one caller at a time (the guard is a module global)."""
+    floorplan.max_image_cells), for one caller at a time (the guard is a module global)."""
     from PIL import Image
 
     with _PIL_LOCK:
@@ -105,17 +106,20 @@ def _quiet_stderr():
 
 
 def check_cells(h: int, w: int, settings: Settings, source: str) -> None:
-    limit = settings.floorplan.max_cells
+    """Refuse a raster of more cells than floorplan.max_image_cells (what is read whole
+    before it is pooled to floorplan.max_cells)."""
+    limit = settings.floorplan.max_image_cells
     if h * w > limit:
         raise FloorplanError(
-            f"{source}: the plan is {w}x{h} cells ({h * w:,}), more than floorplan.max_cells = {limit:,} "
-            f"(raise it with --set floorplan.max_cells=N where the machine has the memory)"
+            f"{source}: the plan is {w}x{h} cells ({h * w:,}), more than floorplan.max_image_cells = {limit:,} "
+            f"(raise it with --set floorplan.max_image_cells=N where the machine has ~3 bytes per cell to read it)"
         )
 
 
 def check_plan_budget(shape: tuple[int, int], resolution: float, settings: Settings, source: str) -> None:
-    """Refuse a plan whose raster or whose estimator search grid (correlative.cell over the
-    plan's extent) exceeds floorplan.max_cells, before either is allocated."""
+    """Refuse a plan whose raster exceeds floorplan.max_image_cells, or whose estimator
+    search grid (correlative.cell over the plan's extent) exceeds floorplan.max_cells,
+    before either is allocated."""
     h, w = shape
     check_cells(h, w, settings, source)
     cell = settings.estimator.correlative.cell
@@ -128,6 +132,27 @@ def check_plan_budget(shape: tuple[int, int], resolution: float, settings: Setti
             f"floorplan.max_cells = {settings.floorplan.max_cells:,}; is the resolution right? "
             f"(--set floorplan.max_cells=N raises the limit)"
         )
+
+
+def coarsening(shape: tuple[int, int], settings: Settings) -> int:
+    """The smallest whole factor k whose k x k pooling of a raster of this shape keeps at
+    most floorplan.max_cells cells (1: the plan fits as it is)."""
+    h, w = shape
+    k = 1
+    while -(-h // k) * -(-w // k) > settings.floorplan.max_cells:
+        k += 1
+    return k
+
+
+def pooled(occupied: np.ndarray, k: int) -> np.ndarray:
+    """occupied pooled k x k from cell (0, 0) (the origin stays): a coarse cell is wall
+    where any of its cells is, so thin walls stay closed; the last row / column of coarse
+    cells may reach past the raster (free there)."""
+    h, w = occupied.shape
+    rows, cols = -(-h // k), -(-w // k)
+    padded = np.zeros((rows * k, cols * k), dtype=bool)
+    padded[:h, :w] = occupied
+    return padded.reshape(rows, k, cols, k).any(axis=(1, 3))
 
 
 def check_resolution(value, source: str) -> float:

@@ -365,7 +365,8 @@ class HypothesisTracker:
         cov = self.pose_covariance(sensor, mode=mode) + self._meas_cov[:3, :3]
         return policy.pose_jumped(float(step @ np.linalg.solve(cov, step)), self.settings)
 
-    def assess_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None) -> tuple[Status, float]:
+    def assess_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None,
+                     explained: float | None = None) -> tuple[Status, float]:
         """(status, confidence) of one frame's reported pose.
 
         status: the round's status, except that a `tracking` frame whose own evidence
@@ -377,6 +378,11 @@ class HypothesisTracker:
         bank's weight, scaled by how far it is confirmed (hits / rounds_to_track, at most
         1), at most dominance_weight unless the frame is `tracking`, and 0 on a frame whose
         evidence contradicts it. nan before any mode.
+
+        explained: the share of the latest BEV's wall points the map explains under the
+        alignment (map_match.py); below min_explained_share a `tracking` frame is reported
+        `ambiguous` (MAP_UNEXPLAINED: no place in this map is known to explain what the
+        sensor sees), and the confidence is scaled by explained / min_explained_share.
         """
         best = self.best
         previous, self._last_reported = self._last_reported, alignment
@@ -384,8 +390,12 @@ class HypothesisTracker:
             return self._status, float("nan")
         contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
         status: Status = "lost" if contradicted and self._status == "tracking" else self._status
+        if status == "tracking" and not policy.map_explains(explained, self.settings):
+            status = "ambiguous"
         confirmation = min(1.0, best.hits / self.rounds_to_track())
         confidence = 0.0 if contradicted else float(best.weight * confirmation)
+        if explained is not None and explained < self.settings.min_explained_share:
+            confidence *= explained / self.settings.min_explained_share
         # never more than the status vouches for: above dominance_weight only while tracking
         # (belgioioso camera session: a mode 16 m off, not singled out, carried 0.96 of the weight)
         return status, confidence if status == "tracking" else min(confidence, self.settings.dominance_weight)

@@ -21,6 +21,7 @@ softmax(weight_gain * running score) over the live modes.
 | TRACKED_KEEPS_ITS_PLACE | the tracked mode is reported unless an established rival outweighs it | rival_established_rounds |
 | NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
 | POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
+| MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share is not `tracking` | min_explained_share |
 
 docs/status.md has the table rule -> function -> setting -> test.
 """
@@ -49,6 +50,7 @@ TRACKING = "tracking"
 TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
 NEWCOMER = "newcomer"
 POSE_JUMP = "pose jump"
+MAP_UNEXPLAINED = "map does not explain the frames"
 
 
 class ModeNumbers(Protocol):
@@ -175,3 +177,13 @@ def pose_jumped(mahalanobis2: float, s: TrackingSettings) -> bool:
     """POSE_JUMP: the change of the reported pose at the sensor, squared Mahalanobis under
     the mode's pose covariance plus one measurement's, beyond pose_jump_chi2."""
     return mahalanobis2 > s.pose_jump_chi2
+
+
+def map_explains(share: float | None, s: TrackingSettings) -> bool:
+    """MAP_UNEXPLAINED when False: under the reported alignment less than
+    min_explained_share of the latest BEV's wall points lie near a plan wall. The one rule
+    that compares with a level, not a gap: a gap says which place is best, not whether any
+    place in this map is right (aces camera session on the FHW map: `tracking`, weight
+    0.95, 44-46 m off, with 0.46 of its BEV explained; on its own map >= 0.61). None (no
+    BEV to judge yet) does not withhold `tracking`."""
+    return share is None or share >= s.min_explained_share

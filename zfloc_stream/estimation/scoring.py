@@ -52,6 +52,7 @@ from .plan_cache import cached_per_floorplan
 # --------------------------------------------------------------------------------------
 
 
+COARSE_BLOCK_ROWS = 512  # rows of the coarse grid quantised at once (bounds the float64 temporaries)
 MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
 
 
@@ -97,7 +98,9 @@ class FaceField:
         # A face cell's centre lies half a cell inside the wall; the wall surface the
         # sensor sees is its edge, so the distance to the surface is about half a cell
         # less (without this, refined scales come out ~1-2 % large in small rooms).
-        return cls(np.maximum(ndimage.distance_transform_edt(~faces, sampling=res) - 0.5 * res, 0.0), origin, res)
+        field = ndimage.distance_transform_edt(~faces, sampling=res)
+        field -= 0.5 * res  # in place: a large plan's field is ~300 MB
+        return cls(np.maximum(field, 0.0, out=field), origin, res)
 
 
 # --------------------------------------------------------------------------------------
@@ -327,7 +330,10 @@ class FloorplanScorer:
         # outermost ring is 255 so points clamped onto the border from outside the grid
         # count as far from any wall (no separate inside test needed).
         self.cap = settings.tau_c + 0.5 * self.resolution
-        coarse = np.where(field < self.cap, np.floor(field / self.cap * float(COARSE_FAR)), float(COARSE_FAR)).astype(np.uint8)
+        coarse = np.empty(field.shape, dtype=np.uint8)
+        for r in range(0, field.shape[0], COARSE_BLOCK_ROWS):  # blocks of rows: float64 temporaries stay small
+            f = field[r : r + COARSE_BLOCK_ROWS]
+            coarse[r : r + COARSE_BLOCK_ROWS] = np.where(f < self.cap, np.floor(f / self.cap * float(COARSE_FAR)), float(COARSE_FAR))
         coarse[[0, -1], :] = COARSE_FAR
         coarse[:, [0, -1]] = COARSE_FAR
         self.coarse_field = np.ascontiguousarray(coarse).ravel()

@@ -13,10 +13,15 @@ class FloorplanSettings(Section):
     line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
     image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
     max_triplets: int = Field(2_000_000, ge=1, le=1_000_000_000)  # 3L table rows (~80 B each while built); a cluttered map past this keeps each line's nearest neighbours only (real maps: <= 0.5 M)
-    # Memory budget of one plan, checked before anything is allocated: cells of its raster
-    # (an image: read from the file's header), and cells of the estimator's search grid
-    # over its extent (estimator.correlative.cell): a wrong resolution or unit blows that up.
+    # Memory and load-time budget of one plan: the cells the estimator keeps. A plan with
+    # more cells is pooled (a coarse cell is wall where any of its cells is) by the smallest
+    # whole factor that fits, with a warning; the estimator's search grid over its extent
+    # (estimator.correlative.cell) must fit too: a wrong resolution or unit blows that up.
+    # Peak memory while a plan is built is ~60 bytes per kept cell (docs/robustness.md).
     max_cells: int = Field(25_000_000, ge=1, le=2_000_000_000)
+    # Cells read before pooling (an image: its size is read from the file's header): ~2-3
+    # bytes each while decoded; 400 M is a 1 x 1 km floor at 0.05 m.
+    max_image_cells: int = Field(400_000_000, ge=1, le=4_000_000_000)
 
 
 class VectorFloorplanSettings(Section):

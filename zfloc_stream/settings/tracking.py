@@ -67,4 +67,9 @@ class TrackingSettings(Section):
     # a frame whose reported pose at the sensor moved by more than this Mahalanobis^2 (mode
     # pose covariance + one measurement; chi2(3 dof) 13.28 is beyond 99.5%) is not `tracking`
     pose_jump_chi2: float = Field(13.28, gt=0, le=1e6)
+    # a frame is `tracking` only while the map explains the latest BEV: at least this share
+    # of its wall points within localizer.monitor_distance of a plan wall under the reported
+    # alignment (MAP_UNEXPLAINED). Shared camera sessions: on their own maps every frame
+    # >= 0.61; against another building's map the frames reported `tracking` explained 0.46
+    min_explained_share: float = Field(0.55, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking

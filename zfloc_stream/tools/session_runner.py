@@ -4,8 +4,10 @@ and overlay.png; optionally ros2.mcap (ROS 2 messages) and a live Foxglove view.
 
 from __future__ import annotations
 
+
 import dataclasses
 import time
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -172,6 +174,9 @@ def run_session(
             bar.update()
         seconds = time.perf_counter() - t_start
     drops.summary()
+    mismatch = localizer.map_match.verdict()
+    if mismatch is not None:
+        warnings.warn(mismatch, stacklevel=2)
     truth = None
     if any(t is not None for t in truths):
         truth = np.array([(np.nan,) * 3 if t is None else np.asarray(t, dtype=float)[:3] for t in truths]).reshape(-1, 3)
