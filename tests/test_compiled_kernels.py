@@ -267,6 +267,7 @@ def test_correlative_kernels_on_degenerate_scores():
         for per_angle in (1, 5, 100):
             best, counts, ok = co._pick(score, 4, per_angle, 0.01)
             assert len(best) == len(counts) <= per_angle
+            assert ok == (per_angle <= len(score) and not np.isnan(score).any())  # else the exact pass
             assert ((best >= 0) & (best < score.shape[0] * 4)).all()
 
 
