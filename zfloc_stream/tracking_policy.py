@@ -21,12 +21,14 @@ softmax(weight_gain * running score) over the live modes.
 | TRACKED_KEEPS_ITS_PLACE | the tracked mode is reported unless an established rival outweighs it | rival_established_rounds |
 | NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
 | POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
+| ODOMETRY_JUMP | an odometry step far beyond the recent motion whose hits the BEV does not explain: map and modes restart, `lost` | odometry_jump_window, odometry_jump_min_step, odometry_jump_min_turn_deg, odometry_jump_factor |
 
 docs/status.md has the table rule -> function -> setting -> test.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -49,6 +51,7 @@ TRACKING = "tracking"
 TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
 NEWCOMER = "newcomer"
 POSE_JUMP = "pose jump"
+ODOMETRY_JUMP = "odometry jump"
 
 
 class ModeNumbers(Protocol):
@@ -175,3 +178,22 @@ def pose_jumped(mahalanobis2: float, s: TrackingSettings) -> bool:
     """POSE_JUMP: the change of the reported pose at the sensor, squared Mahalanobis under
     the mode's pose covariance plus one measurement's, beyond pose_jump_chi2."""
     return mahalanobis2 > s.pose_jump_chi2
+
+
+def odometry_jumped(step: float, turn: float, recent_step: float, recent_turn: float, bev_explains: bool,
+                    s: TrackingSettings) -> bool:
+    """ODOMETRY_JUMP: the odometry moved the sensor by `step` metres and `turn` radians
+    (absolute) since the last fused frame, against at most recent_step and recent_turn
+    per frame over the last odometry_jump_window frames: a step beyond
+    odometry_jump_min_step + odometry_jump_factor * recent_step (or a turn likewise) is
+    implausible for the sensor's motion, and a jump unless the BEV explains the frame's
+    wall hits where the odometry put them (bev_explains: they land on cells older frames
+    saw, without contradicting them). A sparse log (1 m and 75 deg between scans) moves
+    that far and its hits fit; a VIO reset or a wheel slip of metres puts them where
+    nothing was seen, or across open space. Every frame's pose after a jump would be the
+    old alignment applied to the new odometry frame: metres to kilometres off."""
+    if bev_explains:
+        return False
+    far = step > s.odometry_jump_min_step + s.odometry_jump_factor * recent_step
+    turned = turn > math.radians(s.odometry_jump_min_turn_deg) + s.odometry_jump_factor * recent_turn
+    return bool(far or turned)

@@ -91,6 +91,7 @@ class RollingBEV:
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
         self.last_contradiction = 0.0  # of the last fused frame (_contradiction)
+        self.last_known_hits = 0  # of its wall hits, those on cells older frames saw (0 under monitor_min_points)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
         self._last_odometry: tuple | None = None  # the last matched frame's odometry plane pose (x, y, yaw)
@@ -362,6 +363,7 @@ class RollingBEV:
         known, lonely = self.grid.open_without_wall_near(
             wall_hits, self.settings.bev.free_threshold, self.settings.bev.occupied_threshold,
             max(1, int(round(lc.monitor_distance / self.grid.res))), lc.monitor_min_points)
+        self.last_known_hits = known
         return lonely / known if known else 0.0
 
     # ------------------------------------------------------------------------------
