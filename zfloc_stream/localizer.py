@@ -20,6 +20,7 @@ frames' wall hits.
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections import deque
@@ -29,7 +30,7 @@ import numpy as np
 
 from .backbones.perception import Perception, needs_backbones
 from .config import Settings
-from .errors import ZflocError
+from .errors import UsageError, ZflocError
 from .estimate import Alternative, Estimate
 from .estimation.local_refinement import LocalRefinement
 from .estimation.scoring import scoring_kernels
@@ -82,11 +83,31 @@ class Localizer:
         self.odometry_jumps = 0  # of them, found: each restarted the map and the hypotheses
         self._jumped_at = -1  # frame of the latest odometry jump: rounds started before it are dropped
         self._bev_fused_before = 0  # RollingBEV.frames_fused before the latest add (_judge_step)
+        self._push_lock = threading.Lock()  # held by the running push: a second thread's push is refused
+        self._closed = False
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         """Fuse the frame, watch it against the tracked alignment, apply the rounds due at
-        this frame, start a round every k fused frames, report."""
+        this frame, start a round every k fused frames, report.
+
+        One thread feeds a localizer: its frames are one stream, in order. A push that
+        starts while another thread's push runs raises UsageError at once (the running one
+        is untouched); so does a push after close(). The frame's arrays may be reused by
+        the caller as soon as push returns: what the localizer keeps, it copies."""
+        if self._closed:
+            raise UsageError("Localizer.push after close(): its round worker is stopped; make a new Localizer")
+        if not self._push_lock.acquire(blocking=False):
+            raise UsageError("Localizer.push while another thread's push is running: one thread feeds a localizer, "
+                             "its frames in order")
+        try:
+            if self._closed:  # closed by another thread while this push waited to start
+                raise UsageError("Localizer.push after close(): its round worker is stopped; make a new Localizer")
+            return self._push(frame)
+        finally:
+            self._push_lock.release()
+
+    def _push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         index, lc = self.frames_pushed, self.settings.localizer
         self.frames_pushed += 1
         timings: dict[str, float] = {}
@@ -177,10 +198,14 @@ class Localizer:
         return self._kidnap
 
     def close(self) -> None:
-        """Stop the round worker (round_scheduler.RoundScheduler.close)."""
+        """Stop the round worker (round_scheduler.RoundScheduler.close); later pushes raise
+        UsageError. Closing twice is harmless."""
+        self._closed = True
         self.rounds.close()
 
     def __enter__(self) -> "Localizer":
+        if self._closed:
+            raise UsageError("a closed Localizer cannot be entered again: make a new Localizer")
         return self
 
     def __exit__(self, *exc) -> None:
