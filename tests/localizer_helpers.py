@@ -50,3 +50,18 @@ def estimate_bits(est):
     alts = tuple((b(a.pose), b(a.weight), b(a.score), b(a.alignment.params())) for a in est.alternatives)
     align = None if est.alignment is None else b(est.alignment.params())
     return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped, est.round_skipped)  # bytes: NaN == NaN
+
+
+def odometry_jumped(frames, k0, shift=(0.0, 0.0), yaw_deg=0.0):
+    """frames with their odometry jumped from frame k0 on (a persistent jump: a VIO reset, a
+    slipped wheel): turned by yaw_deg about the sensor's odometry position at k0, then
+    shifted by `shift`, while the sensor itself moves on. Camera or laser frames."""
+    key = "T_odom_sensor" if hasattr(frames[0], "T_odom_sensor") else "T_odom_cam"
+    c, s = np.cos(np.deg2rad(yaw_deg)), np.sin(np.deg2rad(yaw_deg))
+    p = getattr(frames[k0], key)[:3, 3].copy()
+    p[2] = 0.0
+    jump = np.eye(4)
+    jump[:2, :2] = [[c, -s], [s, c]]
+    jump[:3, 3] = p - jump[:3, :3] @ p
+    jump[:2, 3] += shift
+    return [f if k < k0 else replace(f, **{key: jump @ getattr(f, key)}) for k, f in enumerate(frames)]

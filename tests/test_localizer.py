@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from localizer_helpers import Kidnapped, carried_off
+from localizer_helpers import Kidnapped, carried_off, odometry_jumped
 
 from zfloc_stream.config import Settings, load_settings
 from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
@@ -292,6 +292,57 @@ def test_an_odometry_spike_is_never_reported_as_tracking(persist):
     else:
         bad = [e.status for e, p in zip(est[k0:], seq.poses[k0:]) if np.linalg.norm(e.pose[:2] - p[:2]) >= 1.0]
         assert "tracking" not in bad
+
+
+JUMPS = {"3 m": ((3.0, 0.0), 0.0), "10 m": ((0.0, -10.0), 0.0), "1 km": ((1000.0, 0.0), 0.0), "30 deg": ((0.0, 0.0), 30.0),
+         "90 deg": ((0.0, 0.0), 90.0)}
+
+
+@pytest.fixture(scope="module")
+def walks():
+    """A camera and a laser walking the apartment, tracked by frame 40."""
+    from laser_helpers import laser_run
+
+    scene = build_scene("apartment", seed=2)
+    camera = list(simulate(scene, SimSettings(), seed=2, n_frames=70))
+    laser_scene, laser = laser_run("apartment", 70)
+    return {"camera": (scene, camera), "laser": (laser_scene, list(laser.frames))}
+
+
+@pytest.mark.parametrize("jump", list(JUMPS))
+@pytest.mark.parametrize("sensor", ["camera", "laser"])
+def test_an_odometry_jump_is_never_tracking_and_the_stream_recovers(walks, sensor, jump):
+    """Issue 44: a persistent odometry jump between two frames (1 km: three frames
+    `tracking` 1,011 m off at confidence 1.0; 3 m: 11-15 frames 2.4-3 m off; 30 and 90 deg:
+    one frame 1.1-1.5 m off). ODOMETRY_JUMP restarts the map and the hypotheses at the
+    jump: no `tracking` frame 1 m+ off after it, tracking again within 20 frames."""
+    scene, frames = walks[sensor]
+    k0 = 40
+    shift, yaw = JUMPS[jump]
+    loc, est = _run(scene, odometry_jumped(frames, k0, shift, yaw))
+    truth = [f.ground_truth for f in frames]
+    err = [np.inf if e.pose is None else float(np.linalg.norm(e.pose[:2] - np.asarray(t)[:2])) for e, t in zip(est, truth)]
+    assert est[k0 - 1].status == "tracking" and err[k0 - 1] < 0.5
+    # the laser walk turns 30-40 deg a frame: a 30 deg jump is within its motion, and the
+    # monitor (the frames' hits against the floorplan) withholds `tracking` instead
+    hidden = (sensor, jump) == ("laser", "30 deg")
+    assert loc.odometry_jumps == (0 if hidden else 1)
+    said = [k for k in range(k0, len(est)) if est[k].round_skipped and "odometry jump" in est[k].round_skipped]
+    if not hidden:  # the jump frame is suspect, the next one restarts: neither is `tracking`
+        assert said[:2] == [k0, k0 + 1] and est[k0].status == est[k0 + 1].status == "lost", said
+        assert "restarted" in est[k0 + 1].round_skipped
+    bad = [(k, round(err[k], 2)) for k in range(k0, len(est)) if est[k].status == "tracking" and err[k] >= 1.0]
+    assert not bad
+    back = next(k for k in range(k0 + 1, len(est)) if est[k].status == "tracking" and est[k - 1].status != "tracking")
+    assert back - k0 <= 20 and all(e < 1.0 for e in err[back:]), err[back:]
+
+
+def test_no_odometry_jump_on_normal_walks(walks):
+    """The sparse laser walk (0.4 m and 30-40 deg a frame) and the camera walk: no step is
+    judged a jump, so the stream is what it was without the rule."""
+    for scene, frames in walks.values():
+        loc, _ = _run(scene, frames)
+        assert loc.odometry_jumps == 0
 
 
 def test_frame_consistency_at_the_monitor_min_consistency_boundary():

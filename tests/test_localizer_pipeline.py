@@ -37,12 +37,27 @@ def laser():
 @pytest.mark.parametrize("delay", ["0", "3", "12"])  # 0 = every_k_frames; 12: rounds overlap
 def test_pipelined_equals_delayed_inline_bit_for_bit(kidnapped_camera, delay):
     floorplan, frames = kidnapped_camera
-    delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
-    with Localizer(floorplan, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
+    # the odometry-jump rule would restart at the jump: off, so the monitor's request is what crosses a round
+    off = "tracking.odometry_jump_window=0"
+    delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed", f"localizer.join_delay={delay}", off))
+    with Localizer(floorplan, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}", off)) as loc:
         piped = [loc.push(f) for f in frames]
         assert loc.rounds.global_search_requests >= 1  # the monitor's global-search request crossed a pending round
     assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
     assert delayed[-1].pose is not None
+
+
+@pytest.mark.parametrize("delay", ["0", "12"])
+def test_an_odometry_jump_on_the_worker_gives_the_same_bits(kidnapped_camera, delay):
+    """The odometry jump restarts the map and drops the rounds started before it
+    (tracking_policy.ODOMETRY_JUMP): the same bits with the rounds on a worker."""
+    floorplan, frames = kidnapped_camera
+    delayed = run_localizer(floorplan, frames, settings_with("localizer.pipeline=delayed", f"localizer.join_delay={delay}"))
+    with Localizer(floorplan, settings_with("localizer.pipeline=pipelined", f"localizer.join_delay={delay}")) as loc:
+        piped = [loc.push(f) for f in frames]
+        assert loc.odometry_jumps == 1
+    assert [estimate_bits(e) for e in piped] == [estimate_bits(e) for e in delayed]
+    assert any(e.round_skipped and "before an odometry jump" in e.round_skipped for e in piped) or delay == "0"
 
 
 def test_a_kidnap_test_on_the_worker_gives_the_same_bits():

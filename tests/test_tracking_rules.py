@@ -280,3 +280,61 @@ def test_confident_rounds(n):
         confident.append(tracker.confidently_tracking)
     first = tracked.index(True)
     assert confident == [r >= first + n - 1 for r in range(12)]
+
+
+# --- the odometry jump (issue 44) ------------------------------------------------------------
+@pytest.mark.parametrize("name", ["odometry_jump_min_step", "odometry_jump_min_turn_deg", "odometry_jump_factor"])
+def test_odometry_jump_limits(name):
+    """ODOMETRY_JUMP: a step (or turn) beyond min + factor x the recent motion is a jump
+    unless the BEV explains the frame's hits; at the limit it is not."""
+    s = S.model_copy(update={"odometry_jump_min_step": 1.0, "odometry_jump_min_turn_deg": 10.0, "odometry_jump_factor": 2.0})
+    recent_step, recent_turn = 0.25, np.deg2rad(4.0)
+    if name == "odometry_jump_min_turn_deg":
+        limit = np.deg2rad(10.0) + 2.0 * recent_turn
+        cases = [(0.0, limit, False), (0.0, above(limit), True)]
+    else:  # the factor and the step floor meet at one boundary: 1.0 + 2.0 * 0.25
+        limit = 1.0 + 2.0 * recent_step
+        cases = [(limit, 0.0, False), (above(limit), 0.0, True)]
+    for step, turn, jumped in cases:
+        assert policy.odometry_jumped(step, turn, recent_step, recent_turn, False, s) is jumped
+        assert policy.odometry_jumped(step, turn, recent_step, recent_turn, True, s) is False  # the BEV explains it
+    # the setting itself moves the boundary
+    bigger = s.model_copy(update={name: getattr(s, name) * 2})
+    step, turn = (0.0, above(np.deg2rad(10.0) + 2.0 * recent_turn)) if name == "odometry_jump_min_turn_deg" else (above(1.0 + 2.0 * recent_step), 0.0)
+    assert not policy.odometry_jumped(step, turn, recent_step, recent_turn, False, bigger)
+
+
+def test_odometry_jump_watch_judges_a_full_window_asks_the_bev_and_lets_the_next_frame_decide():
+    """OdometryJumpWatch: no judgement before odometry_jump_window steps; then a 3 m step
+    is suspect only when the frame's hits are not explained (known hits >=
+    localizer.monitor_min_points and contradiction < localizer.kidnap_contradiction). The
+    next frame decides: back near the track, a spike (nothing restarts); going on from
+    the suspect frame, a jump. Window 0 never judges."""
+    from zfloc_stream.config import Settings
+    from zfloc_stream.odometry_jump import JUMPED, SUSPECT, OdometryJumpWatch
+
+    settings = Settings(tracking={"odometry_jump_window": 3})
+    lc = settings.localizer
+    watch = OdometryJumpWatch(settings)
+
+    def walk(k):
+        return (0.1 * k, 0.0, 0.0)
+
+    assert [watch.judge(walk(k), 0, 1.0) for k in range(4)] == [None] * 4  # first pose, then 3 steps filling the window
+    assert watch.judge((3.3, 0.0, 0.0), lc.monitor_min_points, below(lc.kidnap_contradiction)) is None  # explained
+    watch.restart(walk(3))
+    for k in range(4, 7):
+        assert watch.judge(walk(k), 0, 0.0) is None
+    assert watch.judge((3.6, 0.0, 0.0), lc.monitor_min_points, lc.kidnap_contradiction)[0] == SUSPECT
+    assert watch.judge(walk(8), 0, 1.0) is None  # back on the track: a spike
+    assert watch.judge((3.8, 0.0, 0.0), lc.monitor_min_points - 1, 0.0)[0] == SUSPECT  # too few known hits to explain it
+    verdict = watch.judge((3.9, 0.0, 0.0), 0, 1.0)  # going on from the suspect frame
+    assert verdict[0] == JUMPED and verdict[1].startswith(policy.ODOMETRY_JUMP)
+    for turn, expected in ((np.deg2rad(9.99), None), (np.deg2rad(10.01), SUSPECT)):  # the exact boundary: above
+        watch.restart((0.0, 0.0, 0.0))
+        for _ in range(4):
+            watch.judge((0.0, 0.0, 0.0), 0, 0.0)
+        verdict = watch.judge((0.0, 0.0, turn), 0, 1.0)
+        assert (verdict if verdict is None else verdict[0]) == expected
+    off = OdometryJumpWatch(Settings(tracking={"odometry_jump_window": 0}))
+    assert [off.judge((1e3 * k, 0.0, 0.0), 0, 1.0) for k in range(20)] == [None] * 20

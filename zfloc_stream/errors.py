@@ -36,3 +36,8 @@ class SessionLogError(InputError):
 class BackboneError(ZflocError):
     """A pretrained network cannot be used: the [torch] extra is missing, the model folder
     or hub id cannot be found, or the model is not of the kind asked for."""
+
+
+class UsageError(ZflocError):
+    """The API is used out of order: a closed Localizer is pushed a frame, or two threads
+    push into one Localizer at once."""

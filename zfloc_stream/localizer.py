@@ -20,6 +20,7 @@ frames' wall hits.
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections import deque
@@ -29,7 +30,7 @@ import numpy as np
 
 from .backbones.perception import Perception, needs_backbones
 from .config import Settings
-from .errors import ZflocError
+from .errors import UsageError, ZflocError
 from .estimate import Alternative, Estimate
 from .estimation.local_refinement import LocalRefinement
 from .estimation.scoring import scoring_kernels
@@ -39,6 +40,7 @@ from .frontend.bev import RollingBEV
 from .kidnap_test import KidnapTest, Verdict, better_place
 from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
+from .odometry_jump import JUMPED, OdometryJumpWatch
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
 
@@ -90,15 +92,43 @@ class Localizer:
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
         self._adopted_at = -1  # frame whose kidnap round was adopted last
         self._preview: HypothesisTracker | None = None  # reported while the tracker has no pose (_show_preview)
+        self.jumps = OdometryJumpWatch(self.settings)  # odometry steps the sensor cannot have made (odometry_jump.py)
+        self.odometry_jumps = 0  # of them, found: each restarted the map and the hypotheses
+        self._jumped_at = -1  # frame of the latest odometry jump: rounds started before it are dropped
+        self._bev_fused_before = 0  # RollingBEV.frames_fused before the latest add (_judge_step)
+        self._push_lock = threading.Lock()  # held by the running push: a second thread's push is refused
+        self._closed = False
 
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         """Fuse the frame, watch it against the tracked alignment, apply the rounds due at
-        this frame, start a round every k fused frames, report."""
+        this frame, start a round every k fused frames, report.
+
+        One thread feeds a localizer: its frames are one stream, in order. A push that
+        starts while another thread's push runs raises UsageError at once (the running one
+        is untouched); so does a push after close(). The frame's arrays may be reused by
+        the caller as soon as push returns: what the localizer keeps, it copies."""
+        if self._closed:
+            raise UsageError("Localizer.push after close(): its round worker is stopped; make a new Localizer")
+        if not self._push_lock.acquire(blocking=False):
+            raise UsageError("Localizer.push while another thread's push is running: one thread feeds a localizer, "
+                             "its frames in order")
+        try:
+            if self._closed:  # closed by another thread while this push waited to start
+                raise UsageError("Localizer.push after close(): its round worker is stopped; make a new Localizer")
+            return self._push(frame)
+        finally:
+            self._push_lock.release()
+
+    def _push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         index, lc = self.frames_pushed, self.settings.localizer
         self.frames_pushed += 1
         timings: dict[str, float] = {}
         plane_pose, skipped = self._fuse(frame, timings)
+        verdict = None if plane_pose is None else self._judge_step(plane_pose)
+        if verdict is not None and verdict[0] == JUMPED:
+            plane_pose = self._restart_after_jump(frame, index)
+        jump = None if verdict is None else verdict[1]
         if plane_pose is not None:
             self._recent_hits.append(self.bev.last_wall_hits)
             self._recent_cameras.append(plane_pose[:2])
@@ -110,7 +140,7 @@ class Localizer:
                                                 self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
                 self._start_kidnap_test()
         # a round due here is applied even on a skipped frame: the join frame is fixed
-        reasons = [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
+        reasons = [jump] + [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
         previewed = self._preview is not None and self._preview.best is not None
         mode = None if plane_pose is None else self.rounds.due(self.frames_fused, self.tracker.best is not None, previewed)
         if mode is not None:
@@ -121,7 +151,8 @@ class Localizer:
         elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
             self._refine_locally(timings)  # follow the drift between rounds too
         round_skipped = "; ".join(r for r in reasons if r) or None
-        return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped, round_skipped)
+        return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped, round_skipped,
+                              suspect=verdict is not None)
 
     def _fuse(self, frame, timings: dict) -> tuple[np.ndarray | None, str | None]:
         """Fuse one frame: its plane pose, or None and why it was skipped."""
@@ -135,6 +166,7 @@ class Localizer:
                 return None, f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
             return None, "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
         try:
+            self._bev_fused_before = self.bev.frames_fused
             self.bev.add(frame)
             plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
         except ZflocError as err:  # one bad frame never kills the stream
@@ -143,16 +175,50 @@ class Localizer:
         timings["fusion"] = time.perf_counter() - t0
         return plane_pose, None
 
+    def _judge_step(self, plane_pose: np.ndarray) -> tuple[str, str] | None:
+        """The odometry-jump watch's verdict on this frame's step (odometry_jump.py):
+        None, or (SUSPECT or JUMPED, why). Judged on a frame fused alone (a camera frame
+        that waited for gravity is fused with the buffer: its step and hits are not its
+        own), else recent motion starts again."""
+        if self.bev.frames_fused != self._bev_fused_before + 1:
+            self.jumps.restart(plane_pose)
+            return None
+        return self.jumps.judge(plane_pose, self.bev.last_known_hits, self.bev.last_contradiction)
+
+    def _restart_after_jump(self, frame, index: int) -> np.ndarray:
+        """The odometry jumped (tracking_policy.ODOMETRY_JUMP): the map and every
+        alignment belong to the odometry frame before the jump. The BEV starts again from
+        this frame, the tracker is lost with no mode (a new one needs
+        confirm_rounds_after_loss hits), rounds started before are dropped; gravity stays.
+        Returns the frame's plane pose in the restarted map."""
+        self.bev.clear_map()
+        self.bev.add(frame)  # it was fused once already: the same frame cannot fail now
+        plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
+        self.jumps.restart(plane_pose)
+        self.tracker.declare_lost()
+        self._kidnap = self._preview = None
+        self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
+        self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+        for recent in (self._recent_hits, self._recent_contradiction, self._recent_cameras):
+            recent.clear()
+        self._jumped_at = index
+        self.odometry_jumps += 1
+        return plane_pose
+
     @property
     def kidnap_test(self) -> KidnapTest | None:
         """The running kidnap test (kidnap_test.py), None when none runs."""
         return self._kidnap
 
     def close(self) -> None:
-        """Stop the round worker (round_scheduler.RoundScheduler.close)."""
+        """Stop the round worker (round_scheduler.RoundScheduler.close); later pushes raise
+        UsageError. Closing twice is harmless."""
+        self._closed = True
         self.rounds.close()
 
     def __enter__(self) -> "Localizer":
+        if self._closed:
+            raise UsageError("a closed Localizer cannot be entered again: make a new Localizer")
         return self
 
     def __exit__(self, *exc) -> None:
@@ -197,6 +263,8 @@ class Localizer:
         local refinement follows the tracked mode. Returns why the round did not run (None
         when it did)."""
         self.last_round = outcome
+        if scheduled.job.index < self._jumped_at:
+            return "round started before an odometry jump: dropped"
         if scheduled.preview:
             return self._show_preview(scheduled, outcome, timings)
         if scheduled.job.since:
@@ -287,7 +355,7 @@ class Localizer:
             outcome.cpu_timings["local_refinement"] = time.thread_time() - c0
 
     # ------------------------------------------------------------------------------
-    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None) -> Estimate:
+    def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None, suspect=False) -> Estimate:
         shown = self._preview if self._preview is not None and self.tracker.best is None else self.tracker
         best = shown.best
         if best is None or plane_pose is None:
@@ -301,8 +369,10 @@ class Localizer:
         # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
-        if self._kidnap is not None and alignment is not None:
-            consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
+        if (self._kidnap is not None or suspect) and alignment is not None:
+            # the run of frames the monitor saw contradicts the pose until the test ends; an
+            # odometry step the sensor cannot have made (odometry_jump.py) contradicts it too
+            consistent = False
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
         status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent, explained)
         if shown is not self.tracker and status == "tracking":

@@ -36,7 +36,7 @@ import numpy as np
 
 from . import threads
 from .config import Settings
-from .errors import ZflocError
+from .errors import UsageError, ZflocError
 from .estimation import localize
 from .estimation.results import LocalizationResult
 from .frontend.bev_snapshot import BevSnapshot
@@ -156,6 +156,7 @@ class RoundScheduler:
         self.settings = settings
         self._scheduled: deque[ScheduledRound] = deque()  # started, not yet applied, oldest first
         self._pool: Executor | None = None
+        self._closed = False  # close() stopped the worker for good
         self._global_wanted = False  # the monitor asked the next round for a global search
         self._requests = 0  # how many times it asked
         self._previewed = 0  # the k-th fused frame whose round a preview started ahead of
@@ -250,11 +251,14 @@ class RoundScheduler:
         """Stop the worker. Rounds not applied yet are dropped (no frame reached their join
         frame); the worker finishes the one it is running first."""
         self._scheduled.clear()
+        self._closed = True
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
     def _executor(self) -> Executor:
+        if self._closed:  # a worker started now would never be stopped
+            raise UsageError("a round was started after the localizer was closed")
         if self._pool is None:
             if self.settings.localizer.worker == "process":
                 # spawn, not fork: the caller may hold threads (the session writer's)

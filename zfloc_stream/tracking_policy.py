@@ -22,12 +22,14 @@ softmax(weight_gain * running score) over the live modes.
 | NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
 | POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
 | MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share is not `tracking` | min_explained_share |
+| ODOMETRY_JUMP | an odometry step far beyond the recent motion whose hits the BEV does not explain: map and modes restart, `lost` | odometry_jump_window, odometry_jump_min_step, odometry_jump_min_turn_deg, odometry_jump_factor |
 
 docs/status.md has the table rule -> function -> setting -> test.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -51,6 +53,7 @@ TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
 NEWCOMER = "newcomer"
 POSE_JUMP = "pose jump"
 MAP_UNEXPLAINED = "map does not explain the frames"
+ODOMETRY_JUMP = "odometry jump"
 
 
 class ModeNumbers(Protocol):
@@ -187,3 +190,22 @@ def map_explains(share: float | None, s: TrackingSettings) -> bool:
     0.95, 44-46 m off, with 0.46 of its BEV explained; on its own map >= 0.61). None (no
     BEV to judge yet) does not withhold `tracking`."""
     return share is None or share >= s.min_explained_share
+
+
+def odometry_jumped(step: float, turn: float, recent_step: float, recent_turn: float, bev_explains: bool,
+                    s: TrackingSettings) -> bool:
+    """ODOMETRY_JUMP: the odometry moved the sensor by `step` metres and `turn` radians
+    (absolute) since the last fused frame, against at most recent_step and recent_turn
+    per frame over the last odometry_jump_window frames: a step beyond
+    odometry_jump_min_step + odometry_jump_factor * recent_step (or a turn likewise) is
+    implausible for the sensor's motion, and a jump unless the BEV explains the frame's
+    wall hits where the odometry put them (bev_explains: they land on cells older frames
+    saw, without contradicting them). A sparse log (1 m and 75 deg between scans) moves
+    that far and its hits fit; a VIO reset or a wheel slip of metres puts them where
+    nothing was seen, or across open space. Every frame's pose after a jump would be the
+    old alignment applied to the new odometry frame: metres to kilometres off."""
+    if bev_explains:
+        return False
+    far = step > s.odometry_jump_min_step + s.odometry_jump_factor * recent_step
+    turned = turn > math.radians(s.odometry_jump_min_turn_deg) + s.odometry_jump_factor * recent_turn
+    return bool(far or turned)

@@ -446,6 +446,8 @@ def _pick(score, n_j, per_angle, slack):
     or a non-finite value): use the exact pass."""
     n_i = score.shape[0]
     none = (np.zeros(0, np.int64), np.zeros(0, np.float64), False)
+    if per_angle < 1 or n_i < per_angle:  # no per_angle-th largest row (search_angles never asks)
+        return none
     row_max = _row_maxima(score, n_j)
     if row_max.shape[0] != n_i:
         return none

@@ -29,6 +29,7 @@ it to a BevObservation are bev_snapshot.py's; the scan matcher is scan_match.py.
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 
 import cv2
@@ -91,6 +92,7 @@ class RollingBEV:
         self.frames_dropped = 0  # camera frames dropped from a full gravity buffer
         self.last_wall_hits = np.zeros((0, 2))  # wall points of the last fused frame (plane frame)
         self.last_contradiction = 0.0  # of the last fused frame (_contradiction)
+        self.last_known_hits = 0  # of its wall hits, those on cells older frames saw (0 under monitor_min_points)
         # scan matching's rigid correction of the laser odometry plane (theta, t): plane = R x + t
         self._correction = Sim2()  # odometry plane -> the plane the BEV is fused in
         self._last_odometry: tuple | None = None  # the last matched frame's odometry plane pose (x, y, yaw)
@@ -249,7 +251,7 @@ class RollingBEV:
         if len(self._pending) >= max(self.settings.frontend.gravity.max_pending_frames, 1):
             self._pending.popleft()  # bounded: the oldest waiting frame is given up
             self.frames_dropped += 1
-        self._pending.append(frame)
+        self._pending.append(_own_copy(frame))  # read when gravity is known: the caller may refill its buffers
         if self.gravity.ready:
             while self._pending:
                 self._fuse_camera(self._pending.popleft())
@@ -362,6 +364,7 @@ class RollingBEV:
         known, lonely = self.grid.open_without_wall_near(
             wall_hits, self.settings.bev.free_threshold, self.settings.bev.occupied_threshold,
             max(1, int(round(lc.monitor_distance / self.grid.res))), lc.monitor_min_points)
+        self.last_known_hits = known
         return lonely / known if known else 0.0
 
     # ------------------------------------------------------------------------------
@@ -408,3 +411,15 @@ class RollingBEV:
         increment(g.wall, g.unique_flat(wall_hits, min_wall_points))
 
 
+
+
+def _own_copy(frame: CameraFrame) -> CameraFrame:
+    """The frame with copies of the arrays a waiting frame is read from later: the caller may
+    refill its buffers as soon as push returns (issue 44: a reused depth buffer moved the
+    poses by up to 6 cm). A shallow copy with fresh arrays: the frame was validated."""
+    kept = copy.copy(frame)
+    for name in ("depth", "labels", "K", "T_odom_cam"):
+        value = getattr(frame, name)
+        if value is not None:
+            object.__setattr__(kept, name, np.array(value))
+    return kept

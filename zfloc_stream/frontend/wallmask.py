@@ -89,7 +89,9 @@ def refine_wall_points(
 def _wall_columns(up, is_wall, fx, cx, min_forward_depth):
     """The wall pixels in front of the camera: (index, upright image column shifted to
     0.., gravity-aligned depth d_hat), and per column the deepest non-wall depth (-inf: none).
-    Columns count from the leftmost pixel in front, wall or not."""
+    Columns count from the leftmost pixel in front, wall or not. No wall pixel in front:
+    all four empty (the non-wall pixels are then never written: issue 44's heap
+    corruption)."""
     n = up.shape[0]
     column = np.empty(n, np.int64)
     lo, hi, walls = np.iinfo(np.int64).max, np.iinfo(np.int64).min, 0
@@ -103,7 +105,9 @@ def _wall_columns(up, is_wall, fx, cx, min_forward_depth):
     w_idx = np.empty(walls, np.int64)
     w_col = np.empty(walls, np.int64)
     w_d = np.empty(walls, np.float64)
-    deepest_other = np.full(hi - lo + 1 if walls else 0, -np.inf)
+    if walls == 0:  # no wall in front: nothing to keep (and no column range to index)
+        return w_idx, w_col, w_d, np.full(0, -np.inf)
+    deepest_other = np.full(hi - lo + 1, -np.inf)
     j = 0
     for i in range(n):
         d = np.float64(up[i, 2])

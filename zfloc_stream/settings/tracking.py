@@ -73,3 +73,11 @@ class TrackingSettings(Section):
     # >= 0.61; against another building's map the frames reported `tracking` explained 0.46
     min_explained_share: float = Field(0.55, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
+    # odometry jump (tracking_policy.odometry_jumped): a step between two fused frames longer
+    # than odometry_jump_min_step + odometry_jump_factor x the longest of the last
+    # odometry_jump_window steps (or a turn likewise), whose wall hits the BEV does not
+    # explain, restarts the map and the hypotheses (status lost). 0 frames: never judged.
+    odometry_jump_window: int = Field(10, ge=0, le=10_000)  # frames of recent motion it is compared with (0: off)
+    odometry_jump_min_step: float = Field(1.0, ge=0, le=1e6)  # m
+    odometry_jump_min_turn_deg: float = Field(10.0, ge=0, le=360)
+    odometry_jump_factor: float = Field(1.0, ge=0, le=1e6)
