@@ -162,8 +162,9 @@ class BoundPrior:
         ok = np.ones(len(xy), dtype=bool)
         p = self.prior
         if p.pose is not None:
-            ok &= np.hypot(xy[:, 0] - p.pose[0], xy[:, 1] - p.pose[1]) <= self.gate_sigmas * p.sigma_xy
-            ok &= np.abs(wrap_angle(heading - p.pose[2])) <= self.gate_sigmas * p.sigma_theta
+            # (a hair of slack: the seeds on the gate's edge stay inside it)
+            ok &= np.hypot(xy[:, 0] - p.pose[0], xy[:, 1] - p.pose[1]) <= self.gate_sigmas * p.sigma_xy * (1 + 1e-9)
+            ok &= np.abs(wrap_angle(heading - p.pose[2])) <= self.gate_sigmas * p.sigma_theta * (1 + 1e-9)
         if p.region is not None:
             ok &= inside_polygon(xy, p.region)
         return ok
