@@ -170,3 +170,23 @@ def test_settings_prior_is_the_constructions(symmetric):
         b = [loc.push(f) for f in frames[:8]]
     assert [e.status for e in a] == [e.status for e in b] and a[-1].prior == "active"
     assert all((x.pose is None and y.pose is None) or np.array_equal(x.pose, y.pose) for x, y in zip(a, b))
+
+
+def test_head_start_confirms_at_birth():
+    """PRIOR_HEAD_START: with confirm_rounds - 1 extra hits a mode is tracked in its first
+    round; without, it waits for a second."""
+    from zfloc_stream.sim2 import Sim2
+    from zfloc_stream.tracking import HypothesisTracker
+    from zfloc_stream.tracking_policy import birth_hits
+
+    class Hyp:
+        def __init__(self, alignment, score):
+            self.alignment, self.score = alignment, score
+
+    hyps = [Hyp(Sim2(1.0, 0.3, (2.0, 1.0)), 0.8)]
+    settings = Settings().tracking
+    plain, helped = HypothesisTracker(settings), HypothesisTracker(settings)
+    plain.update(hyps, (0.0, 0.0), 0)
+    helped.update(hyps, (0.0, 0.0), 0, head_start=[settings.confirm_rounds - 1])
+    assert plain.status == "initializing" and helped.status == "tracking"
+    assert birth_hits(0) == 1 and birth_hits(-3) == 1 and birth_hits(2) == 3
