@@ -171,7 +171,7 @@ class Localizer:
         self._reset_at = self.frames_pushed
 
     def _watch(self, prior: Prior | None) -> PriorWatch:
-        return PriorWatch(prior, self.settings.prior, self.settings.tracking.confirm_rounds)
+        return PriorWatch(prior, self.settings.prior, self.settings.tracking.confirm_rounds, self.settings.tracking.weight_gain)
 
     def _restart(self) -> None:
         """Drop every hypothesis (a new prior, or one the frames contradicted)."""

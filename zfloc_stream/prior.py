@@ -15,7 +15,8 @@ Who uses it:
   prior names are never crowded out by better-looking ones elsewhere, and the best place
   elsewhere is still known;
 - the localizer (PriorWatch, below): while the prior holds, the hypotheses outside it are
-  pruned before the tracker sees them, a mode born inside it in a round whose best
+  pruned before the tracker sees them, those inside enter with the prior's log density
+  added (divided by tracking.weight_gain: the tracker's weights become the posterior's), a mode born inside it in a round whose best
   hypothesis lies inside is confirmed sooner (confirm_rounds), and a round whose best
   hypothesis outside scores more than contradiction_gap above the best inside (or that
   has none inside) contradicts it: after
@@ -28,7 +29,7 @@ Who uses it:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -169,6 +170,17 @@ class BoundPrior:
             ok &= inside_polygon(xy, p.region)
         return ok
 
+    def log_density(self, models: np.ndarray) -> np.ndarray:
+        """log p of each model row's implied pose under a pose prior, up to a constant
+        (-d^2 / 2, d the Mahalanobis distance in position and heading; 0 for a region)."""
+        p = self.prior
+        if p.pose is None:
+            return np.zeros(len(np.asarray(models).reshape(-1, 4)))
+        xy, heading = self.implied(models)
+        d2 = ((xy[:, 0] - p.pose[0]) ** 2 + (xy[:, 1] - p.pose[1]) ** 2) / p.sigma_xy**2
+        d2 += (wrap_angle(heading - p.pose[2]) / p.sigma_theta) ** 2
+        return -0.5 * d2
+
     def seeds(self, scale: float) -> np.ndarray:
         """Model rows at the given scale whose implied poses cover a pose prior's gate on a
         seed_step x seed_angle_step grid (coarsened to max_seeds); none for a region alone
@@ -231,6 +243,7 @@ class PriorWatch:
     prior: Prior | None
     settings: PriorSettings
     confirm_rounds: int  # tracking.confirm_rounds: hits a mode needs without the prior
+    weight_gain: float = 15.0  # tracking.weight_gain: a score unit is this much log weight
     bound: BoundPrior | None = None
     state: str | None = None
     against: int = 0  # contradicting rounds in a row
@@ -266,8 +279,13 @@ class PriorWatch:
             if self.against >= self.settings.contradiction_rounds:
                 self.state = CONTRADICTED
                 return Weighed(list(hypotheses), None, contradicted=True)
-        # the prior holds: the places it rules out are pruned (none scores clearly better)
-        kept = [h for h, ok in zip(hypotheses, inside) if ok]
+        # the prior holds: the places it rules out are pruned (none scores clearly better), and
+        # those it keeps are weighed by it: the tracker's weights are softmax(weight_gain x
+        # score), so adding log p(pose) / weight_gain makes them the posterior's (AMCL's
+        # particles start from the initial pose's Gaussian)
+        log_prior = self.bound.log_density(_rows([h.alignment for h in hypotheses]))
+        kept = [replace(h, score=float(h.score) + float(lp) / self.weight_gain)
+                for h, ok, lp in zip(hypotheses, inside, log_prior) if ok]
         head = max(0, self.confirm_rounds - self.settings.confirm_rounds) if best_in >= best_out else 0
         return Weighed(kept, [head] * len(kept))
 
