@@ -190,3 +190,24 @@ def test_head_start_confirms_at_birth():
     helped.update(hyps, (0.0, 0.0), 0, head_start=[settings.confirm_rounds - 1])
     assert plain.status == "initializing" and helped.status == "tracking"
     assert birth_hits(0) == 1 and birth_hits(-3) == 1 and birth_hits(2) == 3
+
+
+def test_cli_wrong_prior_warns_once_and_the_session_replays_with_it(tmp_path, capsys):
+    """run --initial-pose far from the truth: one warning line, the run falls back to the
+    global search, and the session log records the prior so a replay reproduces the run."""
+    from pathlib import Path
+
+    from zfloc_stream.session import read_session
+    from zfloc_stream.tools.replay_cli import main as replay
+
+    sample = Path(__file__).resolve().parents[1] / "replay" / "office-laser.mcap"
+    out = tmp_path / "out"
+    assert main(["run", "--input", str(sample), "--scans", "0:15", "--initial-pose", "0,0,0,1,10", "--out", str(out),
+                 "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    warnings = [line for line in (captured.out + captured.err).splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and "contradict the initial pose" in warnings[0], warnings
+    assert "success@1m: yes" in captured.out
+    logged = read_session(out / "session.mcap").settings.prior
+    assert logged.pose == [0.0, 0.0, 0.0] and logged.sigma_theta_deg == 10.0
+    assert replay([str(out / "session.mcap"), "--check", "--no-progress"]) == 0
