@@ -145,9 +145,9 @@ class BoundPrior:
     prior: Prior
     anchor: np.ndarray  # (3,) the frame's plane pose
     gate_sigmas: float = 2.5
-    seed_step: float = 0.5  # m
+    seed_step: float = 0.25  # m
     seed_angle_step: float = math.radians(5.0)
-    max_seeds: int = 40_000
+    max_seeds: int = 100_000
 
     def implied(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The frame's floorplan position (K, 2) and heading (K,) under each model row."""
