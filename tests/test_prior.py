@@ -211,3 +211,15 @@ def test_cli_wrong_prior_warns_once_and_the_session_replays_with_it(tmp_path, ca
     logged = read_session(out / "session.mcap").settings.prior
     assert logged.pose == [0.0, 0.0, 0.0] and logged.sigma_theta_deg == 10.0
     assert replay([str(out / "session.mcap"), "--check", "--no-progress"]) == 0
+
+
+def test_region_prior_resolves_the_symmetric_ambiguity(symmetric):
+    """ "Somewhere in this wing": the half of the building the walk starts in."""
+    scene, frames, poses = symmetric
+    centre = np.asarray(scene.info["symmetry_center"])
+    assert poses[0][0] < centre[0]  # the walk starts in the west half
+    with Localizer(scene.floorplan, Settings(), prior=Prior.within((centre[0] - 30, centre[1] - 30, centre[0], centre[1] + 30))) as loc:
+        est = [loc.push(f) for f in frames]
+    tracking = [k for k, e in enumerate(est) if e.status == "tracking"]
+    assert tracking and tracking[0] <= 10, [e.status for e in est]
+    assert (_errors(est, poses)[tracking] < 1.0).all()
