@@ -356,6 +356,10 @@ class Localizer:
         if self._kidnap is not None and alignment is not None:
             consistent = False  # the run of frames the monitor saw contradicts the pose until the test ends
         status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent)
+        if status == "tracking" and self._prior.doubted:
+            # the prior's place, but the frames favour another a little (prior.py); the confidence
+            # as for any frame not `tracking` (assess_frame)
+            status, confidence = "ambiguous", min(confidence, self.settings.tracking.dominance_weight)
         if shown is not self.tracker and status == "tracking":
             status = self.tracker.status  # a preview is one round on fewer frames: never a promise
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])

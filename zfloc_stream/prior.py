@@ -20,7 +20,8 @@ Who uses it:
   hypothesis lies inside is confirmed sooner (confirm_rounds), and a round whose best
   hypothesis outside scores more than contradiction_gap above the best inside (or that
   has none inside) contradicts it: after
-  contradiction_rounds such rounds the prior is dropped, the tracker starts over on the
+  contradiction_rounds such rounds the prior is dropped (a round whose best outside leads by
+  more than doubt_gap only withholds `tracking`: the prior chose, the frames do not back it), the tracker starts over on the
   evidence alone and the Estimate says so (Estimate.prior == "contradicted"). The prior is
   let go ("released") once a mode inside it was tracked release_rounds rounds and the
   round's evidence alone singles it out (after_round).
@@ -288,6 +289,12 @@ class PriorWatch:
                 for h, ok, lp in zip(hypotheses, inside, log_prior) if ok]
         head = max(0, self.confirm_rounds - self.settings.confirm_rounds) if best_in >= best_out else 0
         return Weighed(kept, [head] * len(kept))
+
+    @property
+    def doubted(self) -> bool:
+        """The prior holds but the latest round's best outside it scored more than
+        doubt_gap above the best inside: its place is not reported `tracking`."""
+        return self.state == ACTIVE and self.margin < -self.settings.doubt_gap
 
     def holds(self, alignment) -> bool:
         """Does an alignment (Sim2) agree with the bound prior?"""

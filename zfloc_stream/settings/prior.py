@@ -27,6 +27,10 @@ class PriorSettings(Section):
     # it. Held-out real windows (eval_real --lengths 15 --windows 2): a right prior (3 m / 30 deg)
     # met -0.19..+1.0, a prior 10 m off -0.6..-0.2 (the -0.2 where the map covers half the frames)
     contradiction_gap: float = Field(0.25, ge=0, le=10)
+    # while the prior holds, a frame is not `tracking` (but `ambiguous`) when the latest round's
+    # best outside scored more than this above the best inside: the prior picked the place, the
+    # frames do not back it (eval_real, a prior 10 m off: 3 of 80 windows tracked 12-14 m off at 0.25)
+    doubt_gap: float = Field(0.05, ge=0, le=10)
     contradiction_rounds: int = Field(1, ge=1, le=1000)  # contradicting rounds in a row before the prior is dropped
     # hits a mode born inside the prior needs before it is tracked, when the round agrees
     # with the prior (its best hypothesis lies inside); tracking.confirm_rounds without a prior
