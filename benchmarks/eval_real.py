@@ -62,6 +62,7 @@ from zfloc_stream.estimate import STATUSES
 from zfloc_stream.frames import FLOOR, WALL
 from zfloc_stream.rng import make_rng
 from zfloc_stream.localizer import Localizer
+from zfloc_stream.prior import Prior
 from zfloc_stream.metrics import is_success, position_errors
 from zfloc_stream.plan_drawing import draw_plan, two_faces, write_plan_dxf
 from zfloc_stream.vector_floorplan import load_vector_floorplan
@@ -113,6 +114,9 @@ class Conditions:
     depth_scale_jitter: float = 0.0
     depth_noise: float = 0.0
     label_noise: float = 0.0
+    prior_sigma_xy: float = 0.0  # > 0: each window gets a pose prior (prior.py) at its true start pose...
+    prior_sigma_deg: float = 0.0  # ...with these sigmas
+    prior_offset: float = 0.0  # m, the prior's position this far from the truth (a wrong prior), in a seeded direction
 
     def monocular(self) -> bool:
         return any((self.depth_scale_error, self.depth_scale_jitter, self.depth_noise, self.label_noise))
@@ -175,11 +179,25 @@ def monocular_frames(frames, conditions: Conditions, seed: int, log: str, start:
     return out
 
 
-def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
-    """Push the frames through a fresh Localizer; success and where a failure came from."""
+def window_prior(frames, conditions: "Conditions | None", seed: int, start: int) -> Prior | None:
+    """The pose prior of --prior / --prior-offset: at the window's true start pose, or
+    prior_offset metres from it in a direction seeded by the window (heading kept)."""
+    if conditions is None or conditions.prior_sigma_xy <= 0:
+        return None
+    x, y, yaw = np.asarray(frames[0].ground_truth, dtype=float)[:3]
+    angle = make_rng(seed, "prior offset", start).uniform(0, 2 * np.pi)
+    d = conditions.prior_offset
+    return Prior.at(x + d * np.cos(angle), y + d * np.sin(angle), yaw, conditions.prior_sigma_xy,
+                    np.radians(conditions.prior_sigma_deg))
+
+
+def localize_frames(floorplan, frames, settings, prior: Prior | None = None) -> tuple[dict, Localizer]:
+    """Push the frames through a fresh Localizer; success and where a failure came from.
+    prior: given at construction (window_prior); the row then says where the prior's place
+    was tracked (prior_*)."""
     truth = np.array([f.ground_truth for f in frames])
     t0 = time.perf_counter()
-    localizer = Localizer(floorplan, settings)
+    localizer = Localizer(floorplan, settings, prior=prior)
     estimates, plane_poses = [], []
     for f in frames:
         estimates.append(localizer.push(f))
@@ -190,7 +208,14 @@ def localize_frames(floorplan, frames, settings) -> tuple[dict, Localizer]:
     errors = position_errors([e.pose for e in estimates], truth)
     row = {"seconds": seconds, "success": is_success(errors, 1.0), "final_error": float(errors[-1]),
            "final_status": estimates[-1].status, **frame_record(estimates, errors),
-           "first_pose_frame": next((i for i, e in enumerate(estimates) if e.pose is not None), None)}
+           "first_pose_frame": next((i for i, e in enumerate(estimates) if e.pose is not None), None),
+           "first_tracking_frame": next((i for i, e in enumerate(estimates) if e.status == "tracking"), None)}
+    if prior is not None:
+        near = [e.pose is not None and np.hypot(*(np.asarray(e.pose[:2]) - np.array(prior.pose[:2]))) < 2.5 * prior.sigma_xy
+                for e in estimates]
+        # tracking 1 m+ off the truth and near the prior's place: the prior obeyed against the frames
+        row.update(prior_state=estimates[-1].prior,
+                   prior_tracking_off=int(sum(e.status == "tracking" and n and not v < 1.0 for e, n, v in zip(estimates, near, errors))))
     if row["success"]:
         row["cause"] = ""
     elif not np.isfinite(errors[-10:]).all():
@@ -329,7 +354,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         if plan_style:
             row.update(plan_window(floorplan, frames, settings, true_hits(seq.frames(start, stop))))
             floorplan = plan_of(floorplan, settings, plan_style, log, start, stop)
-        result, localizer = localize_frames(floorplan, frames, settings)
+        result, localizer = localize_frames(floorplan, frames, settings, window_prior(frames, conditions, seed, start))
         row.update(result, coverage=map_coverage(floorplan, true_hits(seq.frames(start, stop))))
         if reference:
             obs = localizer.last_observation
@@ -346,7 +371,7 @@ def run_window(log: str, start: int, length: int, seed: int, overrides: list[str
         floorplan = plan_of(floorplan, settings, plan_style, log, start, stop)
     row["coverage"] = map_coverage(floorplan, true_hits(frames))
     if localize:
-        result, _ = localize_frames(floorplan, frames, settings)
+        result, _ = localize_frames(floorplan, frames, settings, window_prior(frames, conditions, seed, start))
         row.update(result)
     if reference:
         points = np.concatenate([laser_points(f) for f in frames])
@@ -456,6 +481,18 @@ def sensor_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
     ours = [_pct([r["success"] for r in by_len[L]]) for L in lengths]
     lines.append(f"| zfloc-stream (online) | {' | '.join(ours)} | {_pct([r['success'] for r in rows])} | "
                  f"{np.median([r['seconds'] for r in rows]):.2f} |")
+    firsts = [r.get("first_tracking_frame") for r in rows]
+    tracked = [f for f in firsts if f is not None]
+    summary = (f"first `tracking` frame: median {np.median(tracked):.0f}, mean {np.mean(tracked):.1f} over {len(tracked)} of "
+               f"{len(rows)} windows" if tracked else f"no window reached `tracking` ({len(rows)} windows)")
+    if any("prior_state" in r for r in rows):
+        states = defaultdict(int)
+        for r in rows:
+            states[r.get("prior_state")] += 1
+        summary += ("; prior at the end: " + ", ".join(f"{k} {v}" for k, v in sorted(states.items(), key=str))
+                    + f"; `tracking` frames 1 m+ off near the prior's place: {sum(r.get('prior_tracking_off', 0) for r in rows)}"
+                    + f" (windows: {sum(r.get('prior_tracking_off', 0) > 0 for r in rows)})")
+    trailer = [summary]
     if reference:
         ref = [_pct([r["ref_success"] for r in by_len[L]]) for L in lengths]
         lines.append(f"| exact correlative search (batch) | {' | '.join(ref)} | {_pct([r['ref_success'] for r in rows])} | "
@@ -473,7 +510,7 @@ def sensor_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
         mine = [r for r in rows if lo <= r["coverage"] < hi]
         cells = [_pct([r["success"] for r in mine])] + ([_pct([r["ref_success"] for r in mine])] if reference else [])
         lines.append(f"| {lo:.1f}-{min(hi, 1.0):.1f} | {len(mine)} | {' | '.join(cells)} |")
-    return "\n".join(lines)
+    return "\n".join(lines + [""] + trailer)
 
 
 def _cache_key(job) -> str:
@@ -580,6 +617,10 @@ def add_condition_options(parser: argparse.ArgumentParser) -> None:
                        help="camera: depth noise growing with range, std N * depth^2")
     group.add_argument("--label-noise", type=float, default=0.0, metavar="P",
                        help="camera: pixels within 2 px of a wall/floor border take the other label with probability P")
+    group.add_argument("--prior", metavar="SIGMA_XY,SIGMA_DEG",
+                       help="give each window a pose prior (Localizer(prior=...)) at its true start pose with these sigmas (m, deg)")
+    group.add_argument("--prior-offset", type=float, default=0.0, metavar="M",
+                       help="with --prior: the prior's position M metres off the truth (a wrong prior)")
     group.add_argument("--whole-log", action="store_true",
                        help="instead of windows: each laser log from its first scan to its last, against the map of the whole log")
     group.add_argument("--kidnap", action="store_true",
@@ -594,6 +635,17 @@ def parse_conditions(parser: argparse.ArgumentParser, args) -> Conditions:
         parser.error(f"--{(bad or ['drift'])[0].replace('_', '-')} must be a finite number > 0 (drift) or >= 0 (the rest)")
     if args.depth_scale_error >= 1 or args.label_noise > 1:
         parser.error("--depth-scale-error must be < 1 and --label-noise at most 1")
+    if args.prior is not None:
+        try:
+            sigma_xy, sigma_deg = (float(v) for v in args.prior.split(","))
+        except ValueError:
+            parser.error(f"--prior must be SIGMA_XY,SIGMA_DEG, got {args.prior!r}")
+        if not (np.isfinite([sigma_xy, sigma_deg]).all() and sigma_xy > 0 and sigma_deg > 0):
+            parser.error(f"--prior sigmas must be positive, got {args.prior!r}")
+        values.update(prior_sigma_xy=sigma_xy, prior_sigma_deg=sigma_deg)
+    if args.prior_offset and args.prior is None or not np.isfinite(args.prior_offset) or args.prior_offset < 0:
+        parser.error("--prior-offset needs --prior and a distance >= 0")
+    values["prior_offset"] = args.prior_offset
     conditions = Conditions(**values)
     if conditions.monocular() and not args.camera:
         parser.error("--depth-scale-error, --depth-scale-jitter, --depth-noise and --label-noise apply to camera windows: add --camera")

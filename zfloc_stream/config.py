@@ -57,6 +57,9 @@ from .settings.tracking import (  # noqa: F401 - re-exported: callers import eve
 from .settings.localizer import (  # noqa: F401 - re-exported: callers import every section from here
     LocalizerSettings,
 )
+from .settings.prior import (  # noqa: F401 - re-exported: callers import every section from here
+    PriorSettings,
+)
 from .settings.inputs import (  # noqa: F401 - re-exported: callers import every section from here
     OdometrySettings,
     GibsonSettings,
@@ -83,6 +86,7 @@ class Settings(Section):
     bev: BevSettings = BevSettings()
     tracking: TrackingSettings = TrackingSettings()
     localizer: LocalizerSettings = LocalizerSettings()
+    prior: PriorSettings = PriorSettings()
     logging: LoggingSettings = LoggingSettings()
     datasets: DatasetSettings = DatasetSettings()
     study: StudySettings = StudySettings()

@@ -66,6 +66,11 @@ class Estimate:
     # scaled by its confirmation, 0 when the frame's own evidence contradicts the pose
     # (tracking.HypothesisTracker.assess_frame); nan before any pose
     confidence: float = float("nan")
+    # the caller's pose prior (prior.py): None without one; "pending" (given, no frame fused
+    # since), "active" (it steers the search and the tracker), "released" (a mode inside it
+    # was tracked long enough: the evidence alone goes on), "contradicted" (the frames are
+    # clearly better explained elsewhere, or nowhere inside it: dropped, the search is global)
+    prior: str | None = None
 
     @property
     def scale(self) -> float:

@@ -41,6 +41,7 @@ from .kidnap_test import KidnapTest, Verdict, better_place
 from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
 from .odometry_jump import JUMPED, OdometryJumpWatch
+from .prior import Prior, PriorWatch
 from .round_scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from .tracking import HypothesisTracker
 
@@ -57,11 +58,22 @@ class Localizer:
     Deterministic for given settings (settings.seed) and frames.
     """
 
-    def __init__(self, floorplan: Floorplan, settings: Settings | None = None, perception: Perception | None = None):
+    def __init__(self, floorplan: Floorplan, settings: Settings | None = None, perception: Perception | None = None,
+                 prior: Prior | None = None):
         """perception: the networks for RGB-only camera frames; by default made from
         settings.backbones when the first such frame arrives (a replay of a session whose
-        frames carry depth never loads them)."""
+        frames carry depth never loads them).
+
+        prior: where the first pushed frame is, as the caller knows it (prior.Prior: a pose
+        with standard deviations, a region, or both; AMCL's initial pose). It replaces
+        settings.prior's (so `self.settings` records it, and a session log with it); None:
+        settings.prior's, by default none (a global search). set_initial_pose gives one at
+        any later time."""
         self.settings = settings or Settings()
+        if prior is not None:
+            if not isinstance(prior, Prior):
+                raise ZflocError(f"Localizer: prior must be a zfloc_stream.prior.Prior, got {type(prior).__name__}")
+            self.settings = self.settings.model_copy(update={"prior": self.settings.prior.model_copy(update=prior.settings_update())})
         self.perception = perception
         self.floorplan = floorplan
         # the scorer backend (scoring.backend: the compiled FloorplanScorer or torch's) is
@@ -99,6 +111,9 @@ class Localizer:
         self._push_lock = threading.Lock()  # held by the running push: a second thread's push is refused
         self._closed = False
 
+        self._prior = self._watch(prior if prior is not None else Prior.from_settings(self.settings.prior))
+        self._reset_at = 0  # rounds started before this frame were for a tracker set_prior replaced: dropped
+
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         """Fuse the frame, watch it against the tracked alignment, apply the rounds due at
@@ -130,6 +145,7 @@ class Localizer:
             plane_pose = self._restart_after_jump(frame, index)
         jump = None if verdict is None else verdict[1]
         if plane_pose is not None:
+            self._prior.bind(index, plane_pose)  # the frame a pending prior describes
             self._recent_hits.append(self.bev.last_wall_hits)
             self._recent_cameras.append(plane_pose[:2])
             self._recent_contradiction.append(self.bev.last_contradiction)
@@ -205,6 +221,46 @@ class Localizer:
         self.odometry_jumps += 1
         return plane_pose
 
+    # ------------------------------------------------------------------------------
+    def set_initial_pose(self, x: float, y: float, theta: float, sigma_xy: float = 1.0,
+                         sigma_theta: float = np.radians(15.0), region=None) -> None:
+        """AMCL's /initialpose: the next pushed frame is at (x, y, theta) in the floorplan
+        (metres, radians), with these standard deviations (region: also inside this
+        polygon). The hypotheses restart from it (set_prior)."""
+        self.set_prior(Prior.at(x, y, theta, sigma_xy, sigma_theta, region))
+
+    def set_region(self, region) -> None:
+        """The next pushed frame lies inside this region: a polygon ((N, 2) vertices, m) or a
+        box (x0, y0, x1, y1). The hypotheses restart from it (set_prior)."""
+        self.set_prior(Prior.within(region))
+
+    def set_prior(self, prior: Prior | None) -> None:
+        """Replace the prior at any time (None: none, a global search). As AMCL's
+        /initialpose, the hypotheses restart: the tracker, a running kidnap test and the
+        rounds in flight are dropped; the BEV (what odometry has fused) stays. The prior
+        describes the next pushed frame. A prior given here is not in self.settings (a
+        session log records the construction's prior only)."""
+        if prior is not None and not isinstance(prior, Prior):
+            raise ZflocError(f"set_prior: prior must be a zfloc_stream.prior.Prior or None, got {type(prior).__name__}")
+        self._prior = self._watch(prior)
+        self._restart()
+        self._reset_at = self.frames_pushed
+
+    def _watch(self, prior: Prior | None) -> PriorWatch:
+        return PriorWatch(prior, self.settings.prior, self.settings.tracking.confirm_rounds, self.settings.tracking.weight_gain)
+
+    def _restart(self) -> None:
+        """Drop every hypothesis (a new prior, or one the frames contradicted)."""
+        self.tracker = HypothesisTracker(self.settings.tracking)
+        self._preview, self._kidnap = None, None
+        self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
+        self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+
+    @property
+    def prior(self) -> str | None:
+        """The prior's state (Estimate.prior): None, pending, active, released or contradicted."""
+        return self._prior.state
+
     @property
     def kidnap_test(self) -> KidnapTest | None:
         """The running kidnap test (kidnap_test.py), None when none runs."""
@@ -247,8 +303,10 @@ class Localizer:
             snapshot = self.bev.snapshot(copy=copy)
         except ZflocError:
             snapshot = None
-        tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted
-        return RoundJob(index, snapshot, self.tracker.warm_start(), tracked)
+        # an active prior keeps the rounds global: each one checks it against the best place elsewhere
+        prior = self._prior.for_round
+        tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted and prior is None
+        return RoundJob(index, snapshot, self.tracker.warm_start(), tracked, prior=prior)
 
     def _kidnap_job(self, index: int, copy: bool) -> RoundJob:
         """The kidnap test's round: a global search on what the frames since its run saw."""
@@ -265,6 +323,8 @@ class Localizer:
         self.last_round = outcome
         if scheduled.job.index < self._jumped_at:
             return "round started before an odometry jump: dropped"
+        if scheduled.job.index < self._reset_at:
+            return "round started before the prior was set: dropped"
         if scheduled.preview:
             return self._show_preview(scheduled, outcome, timings)
         if scheduled.job.since:
@@ -278,7 +338,12 @@ class Localizer:
             return outcome.skipped
         self.last_result = outcome.result
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
+        weighed = self._prior.weigh(outcome.result.hypotheses)
+        if weighed.contradicted:  # the tracker's modes were weighed by the prior: it starts over on the evidence
+            self._restart()
+        self.tracker.update(weighed.hypotheses, scheduled.plane_pose[:2], scheduled.job.index, head_start=weighed.head_start)
+        tracked = self.tracker.tracked_mode
+        self._prior.after_round(None if tracked is None else tracked.alignment, 0 if tracked is None else tracked.tracked_rounds)
         timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         outcome.cpu_timings["tracking"] = time.thread_time() - c0
         if self.tracker.best is not None:
@@ -296,7 +361,8 @@ class Localizer:
         self.last_observation, self.last_result = outcome.observation, outcome.result
         t0 = time.perf_counter()
         self._preview = deepcopy(self.tracker)
-        self._preview.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
+        weighed = self._prior.weigh(outcome.result.hypotheses, judge=False)  # one round on fewer frames: no verdict
+        self._preview.update(weighed.hypotheses, scheduled.plane_pose[:2], scheduled.job.index, head_start=weighed.head_start)
         timings["tracking"] = outcome.timings["tracking"] = time.perf_counter() - t0
         return None
 
@@ -375,6 +441,10 @@ class Localizer:
             consistent = False
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
         status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent, explained)
+        if status == "tracking" and self._prior.doubted:
+            # the prior's place, but the frames favour another a little (prior.py); the confidence
+            # as for any frame not `tracking` (assess_frame)
+            status, confidence = "ambiguous", min(confidence, self.settings.tracking.dominance_weight)
         if shown is not self.tracker and status == "tracking":
             status = self.tracker.status  # a preview is one round on fewer frames: never a promise
         self.map_match.note(explained, status)
@@ -383,4 +453,4 @@ class Localizer:
             first = alternatives[0]
             alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]
         return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped,
-                        confidence)
+                        confidence, self._prior.state)

@@ -42,6 +42,7 @@ from .estimation.results import LocalizationResult
 from .frontend.bev_snapshot import BevSnapshot
 from .heap import limit_arenas, release_free_heap
 from .observation import BevObservation
+from .prior import BoundPrior
 from .rng import make_rng
 from .sim2 import Sim2
 
@@ -55,6 +56,7 @@ class RoundJob:
     warm_start: list[Sim2]
     tracked: bool  # one mode confidently tracked and no global search asked for
     since: int = 0  # a kidnap test: the snapshot holds only what frames from this BEV stamp on saw (0: not a test)
+    prior: BoundPrior | None = None  # the caller's pose prior, while it is active (prior.py): its global search uses it
 
 
 @dataclass
@@ -114,6 +116,7 @@ def _compute_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome
             warm_start=job.warm_start,
             iterations=cfg.estimator.ransac.tracking_iterations if job.tracked else cfg.estimator.ransac.iterations,
             global_search=not job.tracked,
+            prior=job.prior,
         )
     except ZflocError as err:  # a round the estimator refuses is skipped, the stream goes on
         out.skipped = f"estimator error: {err}"

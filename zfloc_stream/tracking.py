@@ -145,11 +145,14 @@ class HypothesisTracker:
         sensor_xy,
         frame: int,
         bev_ready: bool = True,
+        head_start: Sequence[int] | None = None,
     ) -> None:
         """One RANSAC round: predict, gate, associate, update, birth, merge, prune, status.
 
         sensor_xy: current sensor position in the odometry plane. bev_ready=False (the BEV
         is too small to trust) only moves the filters forward and reports initializing.
+        head_start: per hypothesis, hits a mode it starts is born with beyond the first
+        (PRIOR_HEAD_START: the caller's prior vouches for it; None: none).
         """
         sensor = self._check_inputs(hypotheses, sensor_xy, frame)
         self._predict(sensor, frame)
@@ -159,6 +162,7 @@ class HypothesisTracker:
             return
         order = sorted(range(len(hypotheses)), key=lambda j: -tie_key(hypotheses[j].score))
         hyps = [hypotheses[j] for j in order]
+        head = [0 if head_start is None else int(head_start[j]) for j in order]
         scores = np.array([float(h.score) for h in hyps])
         meas = [anchored_state(h.alignment, sensor) for h in hyps]
         matched, explained = self._associate(meas)
@@ -166,7 +170,8 @@ class HypothesisTracker:
             self._score_mode(mode, matched.get(mode.id), meas, scores)
         for j in range(len(hyps)):
             if not explained[j] and policy.birth_rule(j, scores[j], scores[0], self.settings):
-                self._birth(meas[j], scores[j], sensor, near_top=policy.near_top(scores[j], scores[0], self.settings))
+                self._birth(meas[j], scores[j], sensor, near_top=policy.near_top(scores[j], scores[0], self.settings),
+                            hits=policy.birth_hits(head[j]))
         self._merge()
         self._reweight_and_prune()
         self._update_status()
@@ -257,14 +262,14 @@ class HypothesisTracker:
             mode.collapses = mode.collapses + 1 if policy.collapse_rule(j, fresh, scores[0], True, s) else 0
         mode.running_score = (1.0 - s.score_smoothing) * mode.running_score + s.score_smoothing * fresh
 
-    def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray, near_top: bool = True) -> None:
+    def _birth(self, z: np.ndarray, score: float, sensor: np.ndarray, near_top: bool = True, hits: int = 1) -> None:
         kf = KalmanFilter(dim_x=4, dim_z=4)
         kf.x = z.reshape(4, 1).copy()
         kf.P = self._meas_cov.copy()  # one measurement is all it knows
         kf.F = np.eye(4)
         kf.H = np.eye(4)
         kf.R = self._meas_cov.copy()
-        self.modes.append(Mode(self._next_id, kf, sensor.copy(), score, score, near_top=near_top))
+        self.modes.append(Mode(self._next_id, kf, sensor.copy(), score, score, hits=hits, near_top=near_top))
         self._next_id += 1
 
     def _merge(self) -> None:

@@ -9,6 +9,7 @@ softmax(weight_gain * running score) over the live modes.
 |---|---|---|
 | BEST_STARTS_A_MODE | the round's best unexplained hypothesis starts a mode | - |
 | BIRTH_GAP | another one starts a mode within birth_score_gap of the best | birth_score_gap |
+| PRIOR_HEAD_START | a mode born where the caller's prior vouches for it (prior.py) starts with more hits | prior.confirm_rounds |
 | NEAR_TOP | a mode counts a hit when within confirm_score_gap of the round's best | confirm_score_gap |
 | CONFIRMED | hits >= confirm_rounds (confirm_rounds_after_loss after a loss) | confirm_rounds, confirm_rounds_after_loss |
 | BEATEN_BY_RIVAL | the mode's match ranks below a hypothesis scoring lost_score_gap more: a collapse | lost_score_gap |
@@ -54,6 +55,7 @@ NEWCOMER = "newcomer"
 POSE_JUMP = "pose jump"
 MAP_UNEXPLAINED = "map does not explain the frames"
 ODOMETRY_JUMP = "odometry jump"
+PRIOR_HEAD_START = "prior head start"
 
 
 class ModeNumbers(Protocol):
@@ -75,6 +77,14 @@ def birth_rule(rank: int, score: float, best_score: float, s: TrackingSettings) 
     if rank == 0:
         return BEST_STARTS_A_MODE
     return BIRTH_GAP if score >= best_score - s.birth_score_gap else None
+
+
+def birth_hits(head_start: int) -> int:
+    """PRIOR_HEAD_START: the hits a new mode starts with: its own sighting, plus those the
+    caller's prior lends it (the localizer gives tracking.confirm_rounds -
+    prior.confirm_rounds to a mode born inside an active prior in a round whose best
+    hypothesis lies inside it; 0 otherwise)."""
+    return 1 + max(0, int(head_start))
 
 
 def near_top(score: float, best_score: float, s: TrackingSettings) -> bool:

@@ -58,6 +58,7 @@ from .model_generation import correlative_seeds, guided_models, models_2c, model
 from .results import CORRELATIVE, GUIDED, WARM, Hypothesis, LocalizationResult, alignment_of, model_rows
 from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .views import BevView
+from ..prior import PRIOR, BoundPrior
 
 
 def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, cfg: EstimatorSettings) -> list[tuple]:
@@ -83,6 +84,40 @@ def _labels_of(labels: list[tuple[str, int]], index: np.ndarray) -> list[str]:
     return [labels[b][0] for b in block]
 
 
+def _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg: EstimatorSettings, clock: list,
+                 part: np.ndarray | None = None) -> tuple[list[tuple], np.ndarray]:
+    """Coarse-to-fine ranking, LM refinement of the top_n and de-duplication of the models
+    (those indexed by `part`, all by default): (model, C, Cc, Cv, label) rows best first,
+    and the kept model rows. clock: [wall, cpu] moved on by the ranking's time (the
+    round's "scoring" stage; the rest is its "refinement")."""
+    sub = models if part is None else models[part]
+    t0, c0 = time.perf_counter(), time.thread_time()
+    ranking = rank_coarse_to_fine(floorplan, view, sub, sparse, anchor, cfg.scoring)
+    clock[0] += time.perf_counter() - t0
+    clock[1] += time.thread_time() - c0
+    top = ranking.index
+    cand = sub[top].copy()
+    total = ranking.scores.total.copy()
+    cc = ranking.scores.consistency.copy()
+    cv = ranking.scores.violation.copy()
+    n_refine = min(cfg.refine.top_n, len(top))
+    scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
+    if n_refine:
+        field = floorplan_scorer(floorplan, cfg.scoring).face_field
+        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
+        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
+        better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
+        cand[:n_refine][better] = refined[better]
+        total[:n_refine][better] = rescored.total[better]
+        cc[:n_refine][better] = rescored.consistency[better]
+        cv[:n_refine][better] = rescored.violation[better]
+    order = descending(total)
+    keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
+    index = top[keep] if part is None else part[top[keep]]
+    rows = [(cand[i], total[i], cc[i], cv[i], label) for i, label in zip(keep, _labels_of(labels, index))]
+    return rows, cand[keep]
+
+
 def _validate(obs, scale_prior: float, iterations: int) -> None:
     if not isinstance(obs, BevObservation):
         raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
@@ -104,6 +139,7 @@ def localize(
     warm_start: Sequence[Sim2] = (),
     iterations: int | None = None,
     global_search: bool = True,
+    prior: BoundPrior | None = None,
 ) -> LocalizationResult:
     """Align the BEV observation to the floorplan; hypotheses ranked best first.
 
@@ -111,14 +147,19 @@ def localize(
     scale, estimator.correlative.enabled); a round that only follows a tracked mode
     passes False.
 
+    prior: a pose prior (prior.py) adds seeds over its gate to a global search, and the
+    hypotheses inside and outside it are ranked apart (each up to max_hypotheses), so the
+    places it names are never crowded out and the best place elsewhere is still known.
+
     Runs its independent pieces on estimator.threads threads (threads.py), unless the
     caller set the round's thread count already (localizer.run_round)."""
     with threads.limit(threads.resolve(settings.threads), unless_set=True):
-        return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search)
+        return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search, prior)
 
 
 def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: np.random.Generator, scale_prior: float,
-              warm_start: Sequence[Sim2], iterations: int | None, global_search: bool) -> LocalizationResult:
+              warm_start: Sequence[Sim2], iterations: int | None, global_search: bool,
+              prior: BoundPrior | None = None) -> LocalizationResult:
     cfg = settings
     iterations = cfg.ransac.iterations if iterations is None else int(iterations)
     _validate(obs, scale_prior, iterations)
@@ -163,6 +204,10 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         seeds = correlative_seeds(floorplan, obs, cfg, scale_prior, across_prior=not warm)
         blocks.append(seeds)
         labels.append((CORRELATIVE, len(seeds)))
+    if prior is not None and global_search:
+        seeds = prior.seeds(scale_prior if cfg.scale_mode != "fixed" else 1.0)
+        blocks.append(seeds)
+        labels.append((PRIOR, len(seeds)))
     models = np.concatenate(blocks) if blocks else np.zeros((0, 4))
     t1, c1 = time.perf_counter(), time.thread_time()
 
@@ -173,31 +218,21 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         return LocalizationResult([], {"model_estimation": t1 - t0, **zero}, 0, {"model_estimation": c1 - c0, **zero})
     sparse = sparse_line_points(bev.lines, cfg.scoring.sparse_spacing, cfg.scoring.max_sparse_points)
     view = BevView.of(obs, cfg.scoring.tau_v)
-    ranking = rank_coarse_to_fine(floorplan, view, models, sparse, anchor, cfg.scoring)
-    t2, c2 = time.perf_counter(), time.thread_time()
-
-    # ---- refinement --------------------------------------------------------------------
-    top = ranking.index
-    cand = models[top].copy()
-    total = ranking.scores.total.copy()
-    cc = ranking.scores.consistency.copy()
-    cv = ranking.scores.violation.copy()
-    n_refine = min(cfg.refine.top_n, len(top))
-    scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
-    if n_refine:
-        field = floorplan_scorer(floorplan, cfg.scoring).face_field
-        refined = refine_batch(field, obs.wall_points, cand[:n_refine], cfg.refine, cfg.scale_mode, scale_bounds)
-        rescored = score_hypotheses(floorplan, view, refined, cfg.scoring)
-        better = tie_keys(rescored.total) >= tie_keys(total[:n_refine])  # keep a refinement only if it does not hurt C
-        cand[:n_refine][better] = refined[better]
-        total[:n_refine][better] = rescored.total[better]
-        cc[:n_refine][better] = rescored.consistency[better]
-        cv[:n_refine][better] = rescored.violation[better]
-    order = descending(total)
-    keep = order[distinct(cand[order], anchor, cfg.scoring, cfg.ransac.max_hypotheses)]
-    rows = [(cand[i], total[i], cc[i], cv[i], label) for i, label in zip(keep, _labels_of(labels, top[keep]))]
+    ranking_clock = [time.perf_counter(), time.thread_time()]  # "scoring" ends here plus each ranking's own time
+    if prior is None:
+        rows, kept = _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg, ranking_clock)
+    else:  # inside and outside the prior apart: neither crowds the other out
+        inside = prior.inside(models)
+        rows, kept = [], []
+        for part in (np.flatnonzero(inside), np.flatnonzero(~inside)):
+            if len(part):
+                r, k = _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg, ranking_clock, part)
+                rows, kept = rows + r, kept + [k]
+        rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
+        kept = np.concatenate(kept) if kept else np.zeros((0, 4))
+    t2, c2 = ranking_clock
     if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
-        rows += _missing_warm_starts(floorplan, obs, view, warm, cand[keep], anchor, cfg)
+        rows += _missing_warm_starts(floorplan, obs, view, warm, kept, anchor, cfg)
         rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
     t3, c3 = time.perf_counter(), time.thread_time()
 

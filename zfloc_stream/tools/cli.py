@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError, ZflocError
+from .prior_options import add_prior_options, prior_overrides
 from .cli_support import CliParser, install_warning_format, one_line, prepare_out_dir, print_warning
 from .signals import interrupted, terminate_as_interrupt
 
@@ -101,7 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
         "  zfloc-stream run --floorplan map.png --resolution 0.05 --origin -10 -10 --input log.gz --out out/\n"
         "  zfloc-stream run --floorplan map.yaml --input run.mcap --groundtruth gt.csv --scans 0:200 --ros2 --out out/\n"
         "  zfloc-stream run --input session.mcap --live --out out/          # open ws://127.0.0.1:8765 in Foxglove\n"
-        "  zfloc-stream run --floorplan map.yaml --input intel.log.gz --live --rate 4 --live-linger 60 --out out/   # 4x real time",
+        "  zfloc-stream run --floorplan map.yaml --input intel.log.gz --live --rate 4 --live-linger 60 --out out/   # 4x real time\n"
+        "  zfloc-stream run --floorplan map.yaml --input run.mcap --initial-pose 12.5,-3,90,3,30 --out out/   # near the lift, facing +y, +-3 m\n"
+        "  zfloc-stream run --floorplan map.yaml --input run.mcap --region 0,0,20,15 --out out/   # somewhere in this wing (or --region wing.geojson)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument("--floorplan", type=Path, help="ROS map_server YAML, an image with --resolution and --origin, or a "
@@ -123,6 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seg-model", metavar="ID_OR_DIR", help="semantic segmentation network for wall/floor/ceiling labels "
                      "(sets backbones.seg_model; needs the [torch] extra)")
     run.add_argument("--salvage", action="store_true", help="an MCAP session cut off by a crash (or damaged): read it as far as its intact chunks go")
+    add_prior_options(run)
     _add_floorplan_options(run)
     _add_settings_args(run)
 
@@ -170,8 +174,11 @@ def _settings(args):
 
 def _run_settings(args, base_overrides: dict | None = None):
     """Settings of `run`: defaults, the source's needs, --config, --set, then the
-    --depth-model / --seg-model flags."""
+    --depth-model / --seg-model flags and the prior of --initial-pose / --region."""
     settings = load_settings(args.config, args.set, base_overrides=base_overrides)
+    prior = prior_overrides(args)
+    if prior is not None:
+        settings = settings.model_copy(update={"prior": settings.prior.model_copy(update=prior)})
     models = {k: v for k, v in (("depth_model", args.depth_model), ("seg_model", args.seg_model)) if v is not None}
     if not models:
         return settings

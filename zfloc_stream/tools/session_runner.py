@@ -23,7 +23,7 @@ from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
 from ..tum import TumStamps, TumWriter
-from .cli_support import Progress, prepare_out_dir
+from .cli_support import Progress, prepare_out_dir, print_warning
 
 TUM_NAME = "trajectory.tum"  # beside trajectory.csv unless --tum names another path
 TRUTH_TUM_NAME = "groundtruth.tum"  # the reference for evo_ape, same stamps as trajectory.tum
@@ -169,6 +169,9 @@ def run_session(
                 ros2_writer.write(stamp, est, frame.ground_truth)
             if est.skipped is not None:
                 drops.note(est.skipped, f"frame {index}")
+            if est.prior == "contradicted" and (not estimates or estimates[-1].prior != "contradicted"):
+                print_warning(f"frame {index}: the frames contradict the initial pose / region (a place outside it explains "
+                              "them clearly better, or none inside it does): it is dropped, the search is global")
             estimates.append(est)
             truths.append(frame.ground_truth)
             bar.update()
