@@ -49,6 +49,8 @@ class Estimate:
     confidence: see the field's comment.
     scale: the alignment's scale (metres of floorplan per odometry unit; nan without).
     n_hypotheses: the number of live modes.
+    prior: the caller's pose prior (prior.py): None without one, else pending, active,
+        released or contradicted.
     """
 
     frame: int

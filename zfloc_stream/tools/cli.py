@@ -248,11 +248,6 @@ def cmd_demo(args) -> int:
             scene.floorplan, _paced(args, iter(sequence)), settings, args.out, total=args.frames,
             progress=not args.no_progress, description=f"demo {scene.name}", tum=args.tum, live=live, ros2=args.ros2,
         )
-        if groundtruth is not None and outcome.estimates:  # a file that covers only part of the input (or none) is said
-            note = groundtruth.coverage_note(len(outcome.estimates), outcome.truth_from_file, outcome.truth_kept, start,
-                                             (outcome.estimates[0].timestamp, outcome.estimates[-1].timestamp))
-            if note:
-                print_warning(note)
         _report(outcome, settings)
         _linger(args, live)
     finally:
@@ -329,6 +324,11 @@ def cmd_run(args) -> int:
             progress=not args.no_progress, description=f"run {args.input.name}", tum=args.tum, perception=perception,
             groundtruth=groundtruth, first_index=start, live=live, ros2=args.ros2,
         )
+        if groundtruth is not None and outcome.estimates:  # a file that covers only part of the input (or none) is said
+            note = groundtruth.coverage_note(len(outcome.estimates), outcome.truth_from_file, outcome.truth_kept, start,
+                                             (outcome.estimates[0].timestamp, outcome.estimates[-1].timestamp))
+            if note:
+                print_warning(note)
         _report(outcome, settings)
         _linger(args, live)
     finally:
