@@ -211,10 +211,7 @@ class Localizer:
         self.bev.add(frame)  # it was fused once already: the same frame cannot fail now
         plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
         self.jumps.restart(plane_pose)
-        self.tracker.declare_lost()
-        self._kidnap = self._preview = None
-        self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
-        self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+        self._restart(lost=True)
         for recent in (self._recent_hits, self._recent_contradiction, self._recent_cameras):
             recent.clear()
         self._jumped_at = index
@@ -249,9 +246,15 @@ class Localizer:
     def _watch(self, prior: Prior | None) -> PriorWatch:
         return PriorWatch(prior, self.settings.prior, self.settings.tracking.confirm_rounds, self.settings.tracking.weight_gain)
 
-    def _restart(self) -> None:
-        """Drop every hypothesis (a new prior, or one the frames contradicted)."""
-        self.tracker = HypothesisTracker(self.settings.tracking)
+    def _restart(self, lost: bool = False) -> None:
+        """Drop every hypothesis and what followed them (the preview, a kidnap test, the
+        monitor, the local refinement): a new prior, one the frames contradicted, or (lost)
+        an odometry jump, after which the tracker reports `lost` and a new mode needs
+        confirm_rounds_after_loss hits (HypothesisTracker.declare_lost)."""
+        if lost:
+            self.tracker.declare_lost()
+        else:
+            self.tracker = HypothesisTracker(self.settings.tracking)
         self._preview, self._kidnap = None, None
         self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
         self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)

@@ -33,6 +33,9 @@ class MapMatch:
         self.judged = 0  # frames with a pose and a BEV to judge
         self.explained = 0  # of those, frames whose share reached min_explained_share
         self.tracking = 0  # frames reported `tracking`
+        # (alignment, observation, share) of the latest judged frame: between rounds and local
+        # refinements every frame asks again with the same alignment and BEV (push's hot path)
+        self._last: tuple | None = None
 
     def share(self, alignment, observation) -> float | None:
         """Share of the observation's wall points (plane frame) the alignment puts near a
@@ -40,7 +43,12 @@ class MapMatch:
         points = None if observation is None else getattr(observation, "wall_points", None)
         if alignment is None or points is None or len(points) < self.min_points:
             return None
-        return explained_share(self.floorplan, alignment, np.asarray(points)[:: max(1, len(points) // MAX_POINTS)], self.distance)
+        last = self._last
+        if last is not None and last[1] is observation and last[0] == alignment:  # Sim2: equal fields, equal share
+            return last[2]
+        share = explained_share(self.floorplan, alignment, np.asarray(points)[:: max(1, len(points) // MAX_POINTS)], self.distance)
+        self._last = (alignment, observation, share)
+        return share
 
     def note(self, share: float | None, status: str) -> None:
         """Count one reported frame."""

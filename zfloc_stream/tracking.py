@@ -395,11 +395,12 @@ class HypothesisTracker:
             return self._status, float("nan")
         contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
         status: Status = "lost" if contradicted and self._status == "tracking" else self._status
-        if status == "tracking" and not policy.map_explains(explained, self.settings):
+        unexplained = not policy.map_explains(explained, self.settings)
+        if status == "tracking" and unexplained:
             status = "ambiguous"
         confirmation = min(1.0, best.hits / self.rounds_to_track())
         confidence = 0.0 if contradicted else float(best.weight * confirmation)
-        if explained is not None and explained < self.settings.min_explained_share:
+        if unexplained:
             confidence *= explained / self.settings.min_explained_share
         # never more than the status vouches for: above dominance_weight only while tracking
         # (belgioioso camera session: a mode 16 m off, not singled out, carried 0.96 of the weight)

@@ -118,6 +118,11 @@ def _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg: Esti
     return rows, cand[keep]
 
 
+def _best_first(rows: list[tuple]) -> None:
+    """Sort (model, C, Cc, Cv, label) rows in place, best C first (tie_keys: ties stable)."""
+    rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
+
+
 def _validate(obs, scale_prior: float, iterations: int) -> None:
     if not isinstance(obs, BevObservation):
         raise InputError(f"localize expects a BevObservation, got {type(obs).__name__}")
@@ -228,12 +233,12 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
             if len(part):
                 r, k = _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg, ranking_clock, part)
                 rows, kept = rows + r, kept + [k]
-        rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
+        _best_first(rows)
         kept = np.concatenate(kept) if kept else np.zeros((0, 4))
     t2, c2 = ranking_clock
     if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
         rows += _missing_warm_starts(floorplan, obs, view, warm, kept, anchor, cfg)
-        rows.sort(key=lambda row: -float(tie_keys(np.array([row[1]]))[0]))
+        _best_first(rows)
     t3, c3 = time.perf_counter(), time.thread_time()
 
     hypotheses = [Hypothesis(alignment_of(m), float(c), float(a), float(v), label) for m, c, a, v, label in rows]
