@@ -269,7 +269,8 @@ class PriorWatch:
         contradiction (a preview on fewer frames does not)."""
         if self.state != ACTIVE or not hypotheses:
             return Weighed(list(hypotheses), None)
-        inside = self.bound.inside(_rows([h.alignment for h in hypotheses]))
+        rows = _rows([h.alignment for h in hypotheses])
+        inside = self.bound.inside(rows)
         scores = np.array([float(h.score) for h in hypotheses])
         best_in = scores[inside].max(initial=-np.inf)
         best_out = scores[~inside].max(initial=-np.inf)
@@ -284,7 +285,7 @@ class PriorWatch:
         # those it keeps are weighed by it: the tracker's weights are softmax(weight_gain x
         # score), so adding log p(pose) / weight_gain makes them the posterior's (AMCL's
         # particles start from the initial pose's Gaussian)
-        log_prior = self.bound.log_density(_rows([h.alignment for h in hypotheses]))
+        log_prior = self.bound.log_density(rows)
         kept = [replace(h, score=float(h.score) + float(lp) / self.weight_gain)
                 for h, ok, lp in zip(hypotheses, inside, log_prior) if ok]
         head = max(0, self.confirm_rounds - self.settings.confirm_rounds) if best_in >= best_out else 0
