@@ -13,9 +13,9 @@ import numpy as np
 from mcap.records import Message
 
 from . import schemas as S
-from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Ref, channel_message, decode
+from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Ref, decode
 from .frame_grouping import FrameGrouper
-from .ordering import chunk_indexes, chunk_messages, ordered_messages, summary_channels
+from .ordering import chunk_indexes, chunk_messages, ordered_channel_messages, summary_channels
 
 SLOTS = tuple(EXPECTED_SCHEMAS)  # FrameIndex.refs: one slot per session topic, in this order
 # payloads a frame index never decodes in our own files (their stamps are read from the bytes)
@@ -96,12 +96,8 @@ def build_index(session) -> FrameIndex | None:
 
 def indexed_messages(session, f, stamp_only, counted: list[int]) -> Iterator[tuple[str, int, Ref, dict]]:
     """As decoding.messages, in log-time order (ordering.py); each message a Ref to its place."""
-    channels = summary_channels(session)
-    for where, record in ordered_messages(session, f, counted):
-        got = channel_message(session, channels, record, stamp_only)
-        if got is not None:
-            ch, stamp, msg = got
-            yield ch.topic, stamp, Ref(where, msg), ch.metadata
+    for where, ch, stamp, msg in ordered_channel_messages(session, f, stamp_only, counted):
+        yield ch.topic, stamp, Ref(where, msg), ch.metadata
 
 
 def records_indexed(session, index: FrameIndex, start: int, stop: int | None, outputs: bool) -> Iterator:
