@@ -30,6 +30,12 @@ from .decoding import Channel, channel_message, make_channel
 MIB = 1 << 20
 
 
+def has_chunk_index(summary) -> bool:
+    """Whether a file's summary lets it be read through its chunk index (in log-time
+    order, messages counted against its statistics)."""
+    return summary is not None and bool(summary.chunk_indexes) and summary.statistics is not None
+
+
 def chunk_indexes(summary) -> list:
     return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)  # file order
 

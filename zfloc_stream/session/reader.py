@@ -54,7 +54,7 @@ from .decoding import OUTPUT_TOPICS, messages
 from .frame_grouping import FrameGrouper
 from .frame_index import FrameIndex, build_index, records_indexed
 from .mcap_file import check_path, check_topics, file_records, open_indexed, open_salvaged
-from .ordering import OrderWatch, ordered_channel_messages
+from .ordering import OrderWatch, has_chunk_index, ordered_channel_messages
 
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 
@@ -238,7 +238,7 @@ class Session:
     def _messages(self, stamp_only) -> Iterator[tuple[str, int, object, dict]]:
         """The session topics' messages in log-time order where the file has a chunk index
         (ordering.py; salvaging too, where its summary survived), else in file order."""
-        if self.summary is None or not self.summary.chunk_indexes or self.summary.statistics is None:
+        if not has_chunk_index(self.summary):
             why = "the file has no chunk index" if not self.salvage else "the damaged file has no readable summary"
             watch = OrderWatch(self.problems, why)
             records = file_records(self.path, self.salvage, self.problems, watch.see)
