@@ -55,10 +55,11 @@ def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = F
         _report(reader.problems, seen, drops)
         drops.summary()
 
+    sibling = path.parent / SIBLING_FLOORPLAN  # the floorplan of a session that carries none
+
     def load_floorplan():
         if session.floorplan is not None:
             return session.floorplan
-        sibling = path.parent / SIBLING_FLOORPLAN
         if sibling.is_file():
             return load_plan(sibling, settings=settings)
         raise InputError(f"{path} carries no floorplan and there is no {SIBLING_FLOORPLAN} beside it: pass --floorplan")
@@ -77,7 +78,6 @@ def session_sequence(path, settings: Settings, floorplan=None, salvage: bool = F
 
     sequence.topics = {t.rsplit("/", 1)[-1]: t for t in INPUT_TOPICS if session.topics is None or t in session.topics}
     if floorplan is None:
-        sibling = path.parent / SIBLING_FLOORPLAN
         if session.floorplan_files:
             sequence.floorplan_source = "the one the session carries"
         elif sibling.is_file():

@@ -13,9 +13,9 @@ import numpy as np
 from mcap.records import Message
 
 from . import schemas as S
-from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Ref, channel_message, decode
+from .decoding import EXPECTED_SCHEMAS, OUTPUT_TOPICS, Ref, decode
 from .frame_grouping import FrameGrouper
-from .ordering import chunk_indexes, chunk_messages, ordered_messages, summary_channels
+from .ordering import chunk_indexes, chunk_messages, has_chunk_index, ordered_channel_messages, summary_channels
 
 SLOTS = tuple(EXPECTED_SCHEMAS)  # FrameIndex.refs: one slot per session topic, in this order
 # payloads a frame index never decodes in our own files (their stamps are read from the bytes)
@@ -43,7 +43,7 @@ def build_index(session) -> FrameIndex | None:
     """The frame index of a session file (see FrameIndex); None in salvage mode and for
     files without a chunk index or with messages outside chunks."""
     summary = session.summary
-    if session.salvage or summary is None or not summary.chunk_indexes or summary.statistics is None:
+    if session.salvage or not has_chunk_index(summary):
         return None
     # Our writer logs only frames that passed validation, so for its files the grouping
     # alone decides which frames a read yields and bulky payloads are never decoded.
@@ -96,12 +96,8 @@ def build_index(session) -> FrameIndex | None:
 
 def indexed_messages(session, f, stamp_only, counted: list[int]) -> Iterator[tuple[str, int, Ref, dict]]:
     """As decoding.messages, in log-time order (ordering.py); each message a Ref to its place."""
-    channels = summary_channels(session)
-    for where, record in ordered_messages(session, f, counted):
-        got = channel_message(session, channels, record, stamp_only)
-        if got is not None:
-            ch, stamp, msg = got
-            yield ch.topic, stamp, Ref(where, msg), ch.metadata
+    for where, ch, stamp, msg in ordered_channel_messages(session, f, stamp_only, counted):
+        yield ch.topic, stamp, Ref(where, msg), ch.metadata
 
 
 def records_indexed(session, index: FrameIndex, start: int, stop: int | None, outputs: bool) -> Iterator:

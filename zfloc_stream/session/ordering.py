@@ -25,9 +25,15 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from ..config import Settings
 from ..errors import SessionLogError
-from .decoding import Channel, make_channel
+from .decoding import Channel, channel_message, make_channel
 
 MIB = 1 << 20
+
+
+def has_chunk_index(summary) -> bool:
+    """Whether a file's summary lets it be read through its chunk index (in log-time
+    order, messages counted against its statistics)."""
+    return summary is not None and bool(summary.chunk_indexes) and summary.statistics is not None
 
 
 def chunk_indexes(summary) -> list:
@@ -44,12 +50,20 @@ def summary_channels(session) -> dict[int, Channel | None]:
     return session.shared["channels"]
 
 
+class ZeroedChunk(SessionLogError):
+    """Where the index puts a chunk, bytes overwritten with zeros (`zeros` of them)."""
+
+    def __init__(self, message: str, zeros: int):
+        super().__init__(message)
+        self.zeros = zeros
+
+
 def chunk_messages(path, f, chunk) -> list[Message]:
     """The messages of one chunk (found by its index), in their order in the chunk."""
     zeros = zeroed_run(f, chunk.chunk_start_offset, 9 + chunk.chunk_length)
     if zeros:
-        raise SessionLogError(f"{path}: damaged file: zeroed bytes at byte {chunk.chunk_start_offset} (a region overwritten "
-                              f"with zeros, {zeros} bytes where the index puts a chunk); read around it with --salvage")
+        raise ZeroedChunk(f"{path}: damaged file: zeroed bytes at byte {chunk.chunk_start_offset} (a region overwritten "
+                          f"with zeros, {zeros} bytes where the index puts a chunk); read around it with --salvage", zeros)
     try:
         f.seek(chunk.chunk_start_offset)
         record = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=Path(path).stat().st_size).records)
@@ -120,7 +134,7 @@ def ordered_messages(session, f, counted: list[int] | None = None) -> Iterator[t
         except SessionLogError as err:
             if not session.salvage:
                 raise
-            zeros = zeroed_run(f, chunks[item].chunk_start_offset, 9 + chunks[item].chunk_length)
+            zeros = err.zeros if isinstance(err, ZeroedChunk) else 0
             start = chunks[item].chunk_start_offset
             session.problems.append(f"damaged file: zeroed bytes at bytes {start}-{start + zeros - 1} skipped (a region overwritten "
                                     "with zeros)" if zeros else
@@ -130,6 +144,16 @@ def ordered_messages(session, f, counted: list[int] | None = None) -> Iterator[t
             counted[0] += len(inner)
         for p, record in enumerate(inner):
             heapq.heappush(heap, (record.log_time, offset, p, (item, record)))
+
+
+def ordered_channel_messages(session, f, stamp_only, counted: list[int] | None = None) -> Iterator[tuple]:
+    """(place, Channel, stamp, message) of the session topics' messages, decoded
+    (decoding.channel_message) in ordered_messages' order."""
+    channels = summary_channels(session)
+    for where, record in ordered_messages(session, f, counted):
+        got = channel_message(session, channels, record, stamp_only)
+        if got is not None:
+            yield where, *got
 
 
 class OrderWatch:

@@ -50,11 +50,11 @@ from ..frames import CameraFrame, LaserFrame
 from ..pose_interpolation import PoseTrack
 from . import schemas as S
 from .assemble import camera_frame_from_msgs, laser_frame_from_msgs
-from .decoding import OUTPUT_TOPICS, channel_message, messages
+from .decoding import OUTPUT_TOPICS, messages
 from .frame_grouping import FrameGrouper
 from .frame_index import FrameIndex, build_index, records_indexed
 from .mcap_file import check_path, check_topics, file_records, open_indexed, open_salvaged
-from .ordering import OrderWatch, ordered_messages, summary_channels
+from .ordering import OrderWatch, has_chunk_index, ordered_channel_messages
 
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~20x faster on the settings dump
 
@@ -238,20 +238,16 @@ class Session:
     def _messages(self, stamp_only) -> Iterator[tuple[str, int, object, dict]]:
         """The session topics' messages in log-time order where the file has a chunk index
         (ordering.py; salvaging too, where its summary survived), else in file order."""
-        if self.summary is None or not self.summary.chunk_indexes or self.summary.statistics is None:
+        if not has_chunk_index(self.summary):
             why = "the file has no chunk index" if not self.salvage else "the damaged file has no readable summary"
             watch = OrderWatch(self.problems, why)
             records = file_records(self.path, self.salvage, self.problems, watch.see)
             yield from messages(self, records, stamp_only)
             return
-        channels = summary_channels(self)
         counted = [0]
         with open(self.path, "rb") as f:
-            for _, record in ordered_messages(self, f, counted):
-                got = channel_message(self, channels, record, stamp_only)
-                if got is not None:
-                    ch, stamp, msg = got
-                    yield ch.topic, stamp, msg, ch.metadata
+            for _, ch, stamp, msg in ordered_channel_messages(self, f, stamp_only, counted):
+                yield ch.topic, stamp, msg, ch.metadata
         missing = self.summary.statistics.message_count - counted[0]
         if missing > 0 and not self.salvage:
             self.problems.append(f"{missing} message(s) outside the file's chunks skipped (the chunk index does not reach them)")

@@ -46,6 +46,8 @@ def dataset_labels(specs) -> dict[str, str]:
     for depth in range(2, 64):
         taken = Counter(labels.values())
         clashing = [spec for spec in specs if taken[labels[spec]] > 1]
+        if not clashing:
+            break
         for spec in clashing:  # the whole spec once its parts are used up (one file spelt two ways)
             labels[spec] = dataset_label(spec, depth) if depth < 63 else spec
     return labels

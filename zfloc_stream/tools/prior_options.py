@@ -80,10 +80,12 @@ def prior_overrides(args) -> dict | None:
         return None
     update: dict = {}
     pose = None
+    sigma_xy, sigma_deg = 1.0, 15.0  # settings.prior's defaults, where --initial-pose gives none
     if args.initial_pose is not None:
         values = _numbers(args.initial_pose, "--initial-pose", (3, 5))
         x, y, theta_deg = values[:3]
-        sigma_xy, sigma_deg = values[3:] if len(values) == 5 else (1.0, 15.0)
+        if len(values) == 5:
+            sigma_xy, sigma_deg = values[3:]
         if sigma_xy <= 0 or sigma_deg <= 0:
             raise InputError(f"--initial-pose {args.initial_pose!r}: SIGMA_XY and SIGMA_THETA must be positive")
         pose = (x, y, math.radians(theta_deg))
@@ -99,7 +101,7 @@ def prior_overrides(args) -> dict | None:
         else:
             region = _region_file(Path(args.region))
     try:  # the prior's own checks: a polygon with area, finite numbers
-        checked = Prior(pose, update.get("sigma_xy", 1.0), math.radians(update.get("sigma_theta_deg", 15.0)), region)
+        checked = Prior(pose, sigma_xy, math.radians(sigma_deg), region)
     except InputError as err:
         raise InputError(f"--region {args.region}: {str(err).removeprefix('prior: ')}") from None
     if checked.region is not None:

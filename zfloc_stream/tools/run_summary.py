@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..metrics import EVAL_FRAMES
+from ..metrics import EVAL_FRAMES, is_success
 from .session_runner import SessionOutcome
 
 # what a score means, printed beside it (estimation/scoring.py: C = Cc - Cv in [-1, 1])
@@ -50,16 +50,16 @@ def _error_lines(outcome: SessionOutcome, threshold: float) -> list[str]:
         lines.append(f"position error: no pose yet on any of the {summary.frames} frames with ground truth")
     lines.append(f"frames within {threshold:g} m by status: "
                  + ", ".join(f"{status} {k}/{m}" for status, (k, m) in summary.by_status.items()))
-    errors = outcome.errors()
     tail = outcome.final_errors(EVAL_FRAMES)
     last = outcome.estimates[-1]
     if tail is not None and last.pose is not None:
-        ok = bool((tail <= threshold).all())
+        ok = is_success(tail, threshold)
         missing = int((~np.isfinite(tail)).sum())
         worst = f"last-{len(tail)} max {tail.max():.3f} m" if not missing else f"{missing} of the last {len(tail)} frames without a pose"
         lines.append(f"final position error: {tail[-1]:.3f} m; {worst}; success@{threshold:g}m: {'yes' if ok else 'no'}")
     elif tail is None:
         # the success rule needs the truth on each of the last frames: say what is there instead
+        errors = outcome.errors()
         k = min(EVAL_FRAMES, n)
         have = int((~np.isnan(errors[-k:])).sum())
         known = np.flatnonzero(~np.isnan(errors))

@@ -4,7 +4,6 @@ and overlay.png; optionally ros2.mcap (ROS 2 messages) and a live Foxglove view.
 
 from __future__ import annotations
 
-
 import dataclasses
 import time
 import warnings
@@ -19,6 +18,7 @@ from ..drops import DropCounter
 from ..errors import InputError
 from ..estimate import STATUSES, Estimate
 from ..floorplan import Floorplan
+from ..metrics import run_rmse
 from ..overlay import save_overlay
 from ..session import SessionWriter
 from ..trajectory_csv import TrajectoryCsvWriter
@@ -97,7 +97,7 @@ class SessionOutcome:
                 by_status[status] = (int((errors[mask] <= threshold).sum()), int(mask.sum()))
         stat = (lambda f: float(f(posed))) if posed.size else (lambda f: float("nan"))
         return ErrorSummary(threshold, int(known.sum()), int(posed.size), stat(np.mean), stat(np.median), stat(np.max),
-                            float(np.sqrt(np.mean(posed**2))) if posed.size else float("nan"), int((posed > threshold).sum()), by_status)
+                            stat(lambda v: run_rmse(v, last=v.size)), int((posed > threshold).sum()), by_status)
 
 
 def run_session(
