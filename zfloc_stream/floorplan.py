@@ -127,10 +127,14 @@ class Floorplan:
         self.settings = settings if settings is not None else Settings()
         self.name = name
         check_plan_budget(occ.shape, self.resolution, self.settings, f"floorplan {name!r}")
+        unk = None if unknown is None else np.asarray(unknown, dtype=bool)
+        if unk is not None and unk.shape != occ.shape:
+            raise FloorplanError(f"floorplan {name!r}: unknown-cell mask has shape {unk.shape}, the grid {occ.shape}")
         k = coarsening(occ.shape, self.settings)
         if k > 1:  # a large building: coarser cells keep its memory and load time bounded
             h, w = occ.shape
             occ = pooled(np.asarray(occ, dtype=bool), k)
+            unk = None if unk is None else pooled(unk, k)  # pooled with the grid (a wall wins below)
             warnings.warn(f"floorplan {name!r}: {w}x{h} cells at {self.resolution:g} m is more than floorplan.max_cells = "
                           f"{self.settings.floorplan.max_cells:,}: localizing on {k * self.resolution:g} m cells "
                           f"({occ.shape[1]}x{occ.shape[0]}); --set floorplan.max_cells={h * w} keeps every cell "
@@ -142,10 +146,7 @@ class Floorplan:
         self.occupied = occ.astype(bool)
         self.occupied.setflags(write=False)
         self.unknown = None  # None: every non-wall cell is free
-        if unknown is not None:
-            unk = np.asarray(unknown, dtype=bool)
-            if unk.shape != occ.shape:
-                raise FloorplanError(f"floorplan {name!r}: unknown-cell mask has shape {unk.shape}, the grid {occ.shape}")
+        if unk is not None:
             if (unk & ~self.occupied).any():
                 self.unknown = unk & ~self.occupied
                 self.unknown.setflags(write=False)
