@@ -37,7 +37,7 @@ import numpy as np
 
 from zfloc_stream.config import load_settings
 from zfloc_stream.estimation.correspondences import floorplan_matches
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.floorplan import Floorplan, write_ros_map
 from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.rng import make_rng
 
@@ -141,9 +141,7 @@ def large_plan(size: float, seed: int, out: Path, settings, log: str | None):
             k += 1
             if k > 400:
                 break
-    occ = Floorplan.__new__(Floorplan)  # only write_ros's fields: the raster is written, not built
-    occ.occupied, occ.origin, occ.resolution = img, origin, res
-    return Floorplan.write_ros(occ, out, "large"), path
+    return write_ros_map(out, "large", img, res, origin), path  # the raster is written, not built
 
 
 def large_main(args, settings, out: Path) -> int:

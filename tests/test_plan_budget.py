@@ -59,3 +59,18 @@ def test_plan_over_max_image_cells_is_refused_naming_the_setting(tmp_path):
     with pytest.raises(FloorplanError, match=r"more than floorplan.max_image_cells = 19,199 .*--set floorplan.max_image_cells=N"):
         Floorplan.load(path, settings=settings)
     assert Floorplan.load(path).shape == (120, 160)
+
+
+def test_ros_map_with_unknown_cells_over_max_cells_loads_pooled(tmp_path):
+    # a ROS map's grey (unknown) cells are pooled with the walls, not refused as a mask of
+    # the wrong shape (every gmapping map has grey around the building)
+    occ = rooms()
+    unknown = np.zeros_like(occ)
+    unknown[10:20, 10:21] = True
+    path = Floorplan(occ, 0.05, (0.0, 0.0), unknown=unknown, name="grey").write_ros(tmp_path)
+    settings = load_settings(overrides=[f"floorplan.max_cells={occ.size - 1}"])
+    with pytest.warns(UserWarning, match=r"localizing on 0.1 m cells \(80x60\)"):
+        plan = Floorplan.load(path, settings=settings)
+    assert plan.shape == (60, 80) and plan.unknown is not None
+    assert plan.unknown[5:10, 5:11].all() and plan.unknown.sum() == 5 * 6
+    assert not (plan.unknown & plan.occupied).any()

@@ -127,10 +127,14 @@ class Floorplan:
         self.settings = settings if settings is not None else Settings()
         self.name = name
         check_plan_budget(occ.shape, self.resolution, self.settings, f"floorplan {name!r}")
+        unk = None if unknown is None else np.asarray(unknown, dtype=bool)
+        if unk is not None and unk.shape != occ.shape:
+            raise FloorplanError(f"floorplan {name!r}: unknown-cell mask has shape {unk.shape}, the grid {occ.shape}")
         k = coarsening(occ.shape, self.settings)
         if k > 1:  # a large building: coarser cells keep its memory and load time bounded
             h, w = occ.shape
             occ = pooled(np.asarray(occ, dtype=bool), k)
+            unk = None if unk is None else pooled(unk, k)  # pooled with the grid (a wall wins below)
             warnings.warn(f"floorplan {name!r}: {w}x{h} cells at {self.resolution:g} m is more than floorplan.max_cells = "
                           f"{self.settings.floorplan.max_cells:,}: localizing on {k * self.resolution:g} m cells "
                           f"({occ.shape[1]}x{occ.shape[0]}); --set floorplan.max_cells={h * w} keeps every cell "
@@ -142,10 +146,7 @@ class Floorplan:
         self.occupied = occ.astype(bool)
         self.occupied.setflags(write=False)
         self.unknown = None  # None: every non-wall cell is free
-        if unknown is not None:
-            unk = np.asarray(unknown, dtype=bool)
-            if unk.shape != occ.shape:
-                raise FloorplanError(f"floorplan {name!r}: unknown-cell mask has shape {unk.shape}, the grid {occ.shape}")
+        if unk is not None:
             if (unk & ~self.occupied).any():
                 self.unknown = unk & ~self.occupied
                 self.unknown.setflags(write=False)
@@ -276,25 +277,7 @@ class Floorplan:
     def write_ros(self, directory, name: str = "map") -> Path:
         """Write name.yaml + name.png (map_server convention: 0 wall, 254 free, 205 unknown);
         returns the YAML path."""
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        img = np.where(self.occupied[::-1], 0, 254).astype(np.uint8)
-        if self.unknown is not None:
-            img[self.unknown[::-1]] = 205  # p = 0.196: above free_thresh 0.196, below occupied_thresh
-        png = directory / f"{name}.png"
-        if not cv2.imwrite(str(png), img):
-            raise FloorplanError(f"cannot write floorplan image {png}")
-        meta = {
-            "image": png.name,
-            "resolution": float(self.resolution),
-            "origin": [float(self.origin[0]), float(self.origin[1]), 0.0],
-            "negate": 0,
-            "occupied_thresh": 0.65,
-            "free_thresh": 0.196,
-        }
-        out = directory / f"{name}.yaml"
-        out.write_text(yaml.safe_dump(meta, sort_keys=False))
-        return out
+        return write_ros_map(directory, name, self.occupied, self.resolution, self.origin, self.unknown)
 
     # ----------------------------------------------------------------------------------
     # grid geometry
@@ -418,3 +401,28 @@ class Floorplan:
     def __repr__(self) -> str:
         h, w = self.shape
         return f"Floorplan({self.name!r}, {w}x{h} cells at {self.resolution} m, origin={tuple(self.origin)})"
+
+
+def write_ros_map(directory, name: str, occupied: np.ndarray, resolution: float, origin, unknown: np.ndarray | None = None) -> Path:
+    """Write a grid (row index grows with y) as name.yaml + name.png, map_server's
+    convention: 0 wall, 254 free, 205 unknown; returns the YAML path. Floorplan.write_ros,
+    and a raster written without building a plan (benchmarks)."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    img = np.where(occupied[::-1], 0, 254).astype(np.uint8)
+    if unknown is not None:
+        img[unknown[::-1]] = 205  # p = 0.196: above free_thresh 0.196, below occupied_thresh
+    png = directory / f"{name}.png"
+    if not cv2.imwrite(str(png), img):
+        raise FloorplanError(f"cannot write floorplan image {png}")
+    meta = {
+        "image": png.name,
+        "resolution": float(resolution),
+        "origin": [float(origin[0]), float(origin[1]), 0.0],
+        "negate": 0,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+    }
+    out = directory / f"{name}.yaml"
+    out.write_text(yaml.safe_dump(meta, sort_keys=False))
+    return out
