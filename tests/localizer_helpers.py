@@ -15,10 +15,7 @@ class Kidnapped:
 
     def __init__(self, seq, k0, yaw=1.0, shift=(4.0, -3.0)):
         self.seq, self.k0 = seq, k0
-        c, s = np.cos(yaw), np.sin(yaw)
-        self.jump = np.eye(4)
-        self.jump[:2, :2] = [[c, -s], [s, c]]
-        self.jump[:2, 3] = shift
+        self.jump = odometry_jump(yaw, shift)
 
     def __iter__(self):
         for k, frame in enumerate(self.seq):
@@ -52,16 +49,21 @@ def estimate_bits(est):
     return (est.frame, est.status, b(est.pose), b(est.covariance), align, b(est.score), alts, est.skipped, est.round_skipped)  # bytes: NaN == NaN
 
 
+def odometry_jump(yaw, shift, about=(0.0, 0.0)) -> np.ndarray:
+    """The 4x4 jump of an odometry frame: turned by yaw (rad) about the point `about`, then
+    shifted by `shift` (both in the odometry plane)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    jump = np.eye(4)
+    jump[:2, :2] = [[c, -s], [s, c]]
+    about = np.asarray(about, dtype=float)
+    jump[:2, 3] = about - jump[:2, :2] @ about + np.asarray(shift, dtype=float)
+    return jump
+
+
 def odometry_jumped(frames, k0, shift=(0.0, 0.0), yaw_deg=0.0):
     """frames with their odometry jumped from frame k0 on (a persistent jump: a VIO reset, a
     slipped wheel): turned by yaw_deg about the sensor's odometry position at k0, then
     shifted by `shift`, while the sensor itself moves on. Camera or laser frames."""
     key = "T_odom_sensor" if hasattr(frames[0], "T_odom_sensor") else "T_odom_cam"
-    c, s = np.cos(np.deg2rad(yaw_deg)), np.sin(np.deg2rad(yaw_deg))
-    p = getattr(frames[k0], key)[:3, 3].copy()
-    p[2] = 0.0
-    jump = np.eye(4)
-    jump[:2, :2] = [[c, -s], [s, c]]
-    jump[:3, 3] = p - jump[:3, :3] @ p
-    jump[:2, 3] += shift
+    jump = odometry_jump(np.deg2rad(yaw_deg), shift, about=getattr(frames[k0], key)[:2, 3])
     return [f if k < k0 else replace(f, **{key: jump @ getattr(f, key)}) for k, f in enumerate(frames)]

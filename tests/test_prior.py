@@ -18,6 +18,7 @@ from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 from zfloc_stream.sim.trajectory import trajectory_through
 from zfloc_stream.tools.cli import main
+from localizer_helpers import odometry_jumped
 
 
 # --- the prior itself -------------------------------------------------------------------
@@ -158,6 +159,19 @@ def test_set_initial_pose_at_any_time_restarts_from_it(symmetric):
     assert tracking and (_errors(est, poses[12:])[tracking] < 1.0).all()
     with pytest.raises(ZflocError, match="Prior"):
         Localizer(scene.floorplan, Settings(), prior=(1, 2, 3))
+
+
+def test_odometry_jump_releases_an_active_prior(symmetric):
+    """The prior was bound in the map an odometry jump clears: it is let go, not carried
+    into the new map frame (where the same numbers name another place)."""
+    scene, frames, poses = symmetric
+    jumped = odometry_jumped(frames, 15, shift=(10.0, 0.0))
+    with Localizer(scene.floorplan, Settings(), prior=Prior.at(*poses[0], 1.0, math.radians(15))) as loc:
+        est = [loc.push(f) for f in jumped]
+        assert loc.odometry_jumps > 0
+    assert est[14].prior == "active" and est[-1].prior == "released"
+    errors = _errors(est, poses)
+    assert not any(e.status == "tracking" and err >= 1.0 for e, err in zip(est[15:], errors[15:]))
 
 
 def test_settings_prior_is_the_constructions(symmetric):

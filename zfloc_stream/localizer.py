@@ -205,13 +205,15 @@ class Localizer:
         """The odometry jumped (tracking_policy.ODOMETRY_JUMP): the map and every
         alignment belong to the odometry frame before the jump. The BEV starts again from
         this frame, the tracker is lost with no mode (a new one needs
-        confirm_rounds_after_loss hits), rounds started before are dropped; gravity stays.
+        confirm_rounds_after_loss hits), rounds started before are dropped, an active prior
+        is released (it was bound in the cleared map); gravity stays.
         Returns the frame's plane pose in the restarted map."""
         self.bev.clear_map()
         self.bev.add(frame)  # it was fused once already: the same frame cannot fail now
         plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
         self.jumps.restart(plane_pose)
         self._restart(lost=True)
+        self._prior.release()  # it was bound in the cleared map
         for recent in (self._recent_hits, self._recent_contradiction, self._recent_cameras):
             recent.clear()
         self._jumped_at = index

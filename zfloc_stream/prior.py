@@ -259,6 +259,13 @@ class PriorWatch:
         if self.state == PENDING:
             self.bound, self.state, self.since_frame = self.prior.bind(plane_pose, self.settings), ACTIVE, frame
 
+    def release(self) -> None:
+        """Let go of an active prior whose bound frame no longer exists (the map it was
+        bound in was cleared after an odometry jump): what it said of that place cannot be
+        carried to the new map frame. A pending prior is kept: it describes a frame to come."""
+        if self.state == ACTIVE:
+            self.bound, self.state = None, RELEASED
+
     @property
     def for_round(self) -> BoundPrior | None:
         """The prior a round's search uses (only while active)."""
