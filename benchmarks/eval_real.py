@@ -68,7 +68,9 @@ from zfloc_stream.plan_drawing import draw_plan, two_faces, write_plan_dxf
 from zfloc_stream.vector_floorplan import load_vector_floorplan
 from zfloc_stream.sim2 import Sim2
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+# ../shared/data beside the repository, else /work/shared/data (a clone elsewhere, as CI's)
+_BESIDE = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = (_BESIDE if _BESIDE.is_dir() else Path("/work/shared/data")) / "carmen"
 LOGS = ["intel", "aces", "belgioioso", "fhw", "orebro"]
 LENGTHS = [15, 20, 35, 50, 100]
 COVERAGE_DISTANCE = 0.3  # metres: estimator.correlative.tolerance, "near a wall"
@@ -686,7 +688,7 @@ def main(argv=None) -> int:
     logs = [s for s in args.logs.split(",") if s]
     missing_logs = [log for log in logs if not (DATA / f"{log}-corrected.log.gz").exists()]
     if missing_logs:
-        parser.error(f"no Carmen log for {', '.join(missing_logs)} in {DATA} (have: {', '.join(LOGS)})")
+        parser.error(f"no Carmen log for {', '.join(missing_logs)} in {DATA} (have: {', '.join(sorted(p.name.split('-')[0] for p in DATA.glob('*-corrected.log.gz'))) or 'none'})")
     try:
         lengths = [int(v) for v in args.lengths.split(",")]
     except ValueError:
