@@ -74,3 +74,22 @@ def test_ros_map_with_unknown_cells_over_max_cells_loads_pooled(tmp_path):
     assert plan.shape == (60, 80) and plan.unknown is not None
     assert plan.unknown[5:10, 5:11].all() and plan.unknown.sum() == 5 * 6
     assert not (plan.unknown & plan.occupied).any()
+
+
+def test_vector_plan_over_max_cells_is_drawn_coarser_with_a_warning(tmp_path):
+    """A drawing over floorplan.max_cells is drawn at once on coarser cells (no full-size
+    raster); its lines stay the drawing's own. A 300 m drawing (36.5 M cells at 0.05 m) is
+    under datasets.vector_floorplan.max_cells by default, so it loads."""
+    from fuzz_inputs import BOX, write_dxf
+    from zfloc_stream.vector_floorplan import load_vector_floorplan
+
+    path = write_dxf(tmp_path / "room.dxf", BOX + [((0, 4), (6, 4))])  # 10 x 8 m + 1 m margins: 240 x 200 cells
+    exact = load_vector_floorplan(path)
+    settings = load_settings(overrides=[f"floorplan.max_cells={240 * 200 - 1}"])
+    with pytest.warns(UserWarning, match=r"floorplan 'room': 240x200 cells at 0.05 m .* localizing on 0.1 m cells \(120x100\)"):
+        plan = load_vector_floorplan(path, settings)
+    assert plan.resolution == pytest.approx(0.1) and plan.shape == (100, 120)
+    assert np.allclose(plan.origin, exact.origin)
+    assert np.array_equal(plan.lines.endpoints, exact.lines.endpoints)
+    assert plan.occupied[plan.world_to_cell(np.array([[3.0, 4.0]]))].all()  # the inner wall is drawn
+    assert Settings().datasets.vector_floorplan.max_cells >= 6040 * 6040

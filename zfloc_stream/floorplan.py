@@ -42,6 +42,7 @@ from .raster_files import (
     check_plan_budget,
     check_resolution,
     coarsening,
+    coarsening_warning,
     image_size,
     pooled,
     read_gray,
@@ -135,10 +136,7 @@ class Floorplan:
             h, w = occ.shape
             occ = pooled(np.asarray(occ, dtype=bool), k)
             unk = None if unk is None else pooled(unk, k)  # pooled with the grid (a wall wins below)
-            warnings.warn(f"floorplan {name!r}: {w}x{h} cells at {self.resolution:g} m is more than floorplan.max_cells = "
-                          f"{self.settings.floorplan.max_cells:,}: localizing on {k * self.resolution:g} m cells "
-                          f"({occ.shape[1]}x{occ.shape[0]}); --set floorplan.max_cells={h * w} keeps every cell "
-                          f"(~60 bytes each while the plan is built)", stacklevel=2)
+            warnings.warn(coarsening_warning(f"floorplan {name!r}", (h, w), self.resolution, k, self.settings), stacklevel=2)
             self.resolution *= k
         extent = self.origin + np.array(occ.shape[::-1]) * self.resolution
         if np.abs(extent).max() > MAX_COORDINATE:

@@ -144,6 +144,16 @@ def coarsening(shape: tuple[int, int], settings: Settings) -> int:
     return k
 
 
+def coarsening_warning(source: str, shape: tuple[int, int], resolution: float, k: int, settings: Settings) -> str:
+    """The one line said when a plan of this shape (cells at resolution) is localized on
+    k times coarser cells to fit floorplan.max_cells."""
+    h, w = shape
+    return (f"{source}: {w}x{h} cells at {resolution:g} m is more than floorplan.max_cells = "
+            f"{settings.floorplan.max_cells:,}: localizing on {k * resolution:g} m cells "
+            f"({-(-w // k)}x{-(-h // k)}); --set floorplan.max_cells={h * w} keeps every cell "
+            f"(~60 bytes each while the plan is built)")
+
+
 def pooled(occupied: np.ndarray, k: int) -> np.ndarray:
     """occupied pooled k x k from cell (0, 0) (the origin stays): a coarse cell is wall
     where any of its cells is, so thin walls stay closed; the last row / column of coarse

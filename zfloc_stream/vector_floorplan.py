@@ -33,6 +33,7 @@ turns the geometry into a Floorplan.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -45,7 +46,7 @@ from .config import Settings
 from .documents import real_number
 from .errors import FloorplanError
 from .floorplan import Floorplan
-from .raster_files import check_plan_budget
+from .raster_files import check_plan_budget, coarsening, coarsening_warning
 from .geometry import CircleSet, LineSet, deduplicate_lines
 from .plan_readers import ARC_CHORD, CIRCLE_FIT_TOLERANCE, MIN_CIRCLE_VERTICES, VECTOR_SUFFIXES, VectorGeometry, read_dxf, read_geojson, read_svg
 from .segment_merging import merge_collinear
@@ -145,6 +146,11 @@ def _rasterise(prims: _Primitives, settings: Settings, name: str) -> tuple[np.nd
         )
     w, h = int(fw), int(fh)
     check_plan_budget((h, w), res, settings, name)  # the estimator's grid too, before the raster
+    factor = coarsening((h, w), settings)
+    if factor > 1:  # a large building: drawn on coarser cells at once (the lines stay the drawing's own)
+        warnings.warn(coarsening_warning(f"floorplan {name!r}", (h, w), res, factor, settings), stacklevel=3)
+        res = res * factor
+        w, h = -(-w // factor), -(-h // factor)
     shift = 4  # cv2 sub-pixel bits
     k = float(1 << shift)
 

@@ -32,7 +32,10 @@ class VectorFloorplanSettings(Section):
     wall_thickness: float = Field(0.1, gt=0, le=10)  # m, a wall drawn as a line is rasterised this thick
     solid_max_width: float = Field(0.6, ge=0, le=100)  # m, closed shapes narrower than this (2 area / perimeter) are solid (walls, columns); wider ones (rooms) are outlines
     margin: float = Field(1.0, ge=0, le=1000)  # m of free border around the drawing
-    max_cells: int = Field(25_000_000, ge=1, le=1_000_000_000)  # larger rasters are refused (a wrong unit scale, usually)
+    # Cells of the drawing at `resolution` over its extent: larger drawings are refused (a wrong
+    # unit scale, usually; 1 km x 1 km is 400 M). One over floorplan.max_cells is drawn on
+    # coarser cells (the lines stay the drawing's own).
+    max_cells: int = Field(400_000_000, ge=1, le=1_000_000_000)
     # Drawn entities a plan may expand to, counted before anything is expanded: DXF
     # entities with every block reference (INSERT) counted as its block's expansion, SVG
     # elements with every <use> counted as what it references (a few nested blocks of 10
