@@ -13,6 +13,7 @@ everything a floorplan computes on construction), then the RANSAC per-plan table
     python benchmarks/bench_plan_load.py --keep plan/    # keep the generated files
     python benchmarks/bench_plan_load.py --set floorplan.max_triplets=500000
     python benchmarks/bench_plan_load.py --large 300 --log fhw   # issue 43: a 300 x 300 m raster
+    python benchmarks/bench_plan_load.py --large 300 --vector    # the same floor as a DXF
 
 --large S: a S x S m floor of the same kind drawn at 0.05 m (a raster of (S/0.05)^2 cells),
 loaded with the default settings as a ROS map (pooled to floorplan.max_cells when larger):
@@ -93,12 +94,14 @@ def timed(fn):
     return value, (time.perf_counter() - t0, time.process_time() - c0)
 
 
-def large_plan(size: float, seed: int, out: Path, settings, log: str | None):
+def large_plan(size: float, seed: int, out: Path, settings, log: str | None, vector: bool = False):
     """(map YAML, the Carmen log's path or None) of a size x size m floor at 0.05 m: rooms
     along corridors (building_segments), or with `log` the whole-log maps of the shared
     Carmen logs tiled over it (real walls and clutter everywhere, as one map of a large
     building would have): the log's own map once, at its own coordinates in the corner,
-    the other logs' maps (turned by quarter turns in turn) filling the rest row by row."""
+    the other logs' maps (turned by quarter turns in turn) filling the rest row by row.
+    vector: the rooms-and-corridors floor as a DXF instead (drawn on coarser cells past
+    floorplan.max_cells)."""
     global WIDTH, HEIGHT
     res, margin = 0.05, 1.0
     n = int(round((size + 2 * margin) / res))
@@ -107,6 +110,8 @@ def large_plan(size: float, seed: int, out: Path, settings, log: str | None):
     if log is None:
         WIDTH = HEIGHT = size
         segments, pillars = building_segments(seed)
+        if vector:
+            return write_dxf(segments, pillars, out / "large.dxf"), None
         canvas = np.zeros((n, n), dtype=np.uint8)
         for a, b in np.round((segments + margin) / res).astype(np.int32):
             cv2.line(canvas, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, 2)
@@ -150,17 +155,17 @@ def large_main(args, settings, out: Path) -> int:
     from zfloc_stream.estimation.correlative import _near_wall_mask
     from zfloc_stream.estimation.scoring import floorplan_scorer
 
-    yaml_path, log_path = large_plan(args.large, args.seed, out, settings, args.log)
+    plan_path, log_path = large_plan(args.large, args.seed, out, settings, args.log, args.vector)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
-    plan, t_load = timed(lambda: Floorplan.load(yaml_path, settings=settings))
+    plan, t_load = timed(lambda: load_floorplan(plan_path, settings=settings))
     _, t_tables = timed(lambda: (floorplan_scorer(plan, settings.estimator.scoring), floorplan_matches(plan, settings.estimator.solvers),
                                  _near_wall_mask(plan, settings.estimator.correlative.cell, settings.estimator.correlative.tolerance)))
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
     h, w = plan.shape
-    print(f"plan: {args.large:.0f} x {args.large:.0f} m at 0.05 m -> kept {w} x {h} cells at {plan.resolution:g} m "
+    print(f"plan: {args.large:.0f} x {args.large:.0f} m {'DXF' if args.vector else 'raster'} at 0.05 m -> kept {w} x {h} cells at {plan.resolution:g} m "
           f"({len(plan.lines)} lines, {len(plan.circles)} circles)")
     print("| step | wall s | CPU s |\n|---|---|---|")
-    print(f"| Floorplan.load (image, pooling, field, primitives) | {t_load[0]:.2f} | {t_load[1]:.2f} |")
+    print(f"| load_floorplan (image or drawing, pooling, field, primitives) | {t_load[0]:.2f} | {t_load[1]:.2f} |")
     print(f"| estimator tables (scorer, RANSAC, correlative mask) | {t_tables[0]:.2f} | {t_tables[1]:.2f} |")
     print(f"| total | {t_load[0] + t_tables[0]:.2f} | {t_load[1] + t_tables[1]:.2f} |")
     print(f"peak RSS of the process: {peak:.0f} MiB ({before:.0f} MiB before the load: imports, kernels, the generated image)")
@@ -193,6 +198,7 @@ def main(argv=None) -> int:
                         help="settings override, e.g. floorplan.max_triplets=500000")
     parser.add_argument("--large", type=float, metavar="S", help="instead: a S x S m raster at 0.05 m, default settings (issue 43)")
     parser.add_argument("--log", help="with --large: a Carmen log whose map is placed in the plan and whose scans are played on it")
+    parser.add_argument("--vector", action="store_true", help="with --large (no --log): the floor as a DXF drawing, not a raster")
     parser.add_argument("--frames", type=int, default=150, help="with --log: scans played")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
