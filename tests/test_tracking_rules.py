@@ -307,30 +307,31 @@ def test_odometry_jump_limits(name):
 def test_odometry_jump_watch_judges_a_full_window_asks_the_bev_and_lets_the_next_frame_decide():
     """OdometryJumpWatch: no judgement before odometry_jump_window steps; then a 3 m step
     is suspect only when the frame's hits are not explained (known hits >=
-    localizer.monitor_min_points and contradiction < localizer.kidnap_contradiction). The
+    localizer.monitor_min_points and contradiction < tracking.odometry_jump_contradiction). The
     next frame decides: back near the track, a spike (nothing restarts); going on from
     the suspect frame, a jump. Window 0 never judges."""
     from zfloc_stream.config import Settings
     from zfloc_stream.odometry_jump import JUMPED, SUSPECT, OdometryJumpWatch
 
     settings = Settings(tracking={"odometry_jump_window": 3})
-    lc = settings.localizer
+    lc, limit = settings.localizer, settings.tracking.odometry_jump_contradiction
     watch = OdometryJumpWatch(settings)
 
     def walk(k):
         return (0.1 * k, 0.0, 0.0)
 
     assert [watch.judge(walk(k), 0, 1.0) for k in range(4)] == [None] * 4  # first pose, then 3 steps filling the window
-    assert watch.judge((3.3, 0.0, 0.0), lc.monitor_min_points, below(lc.kidnap_contradiction)) is None  # explained
+    assert watch.judge((3.3, 0.0, 0.0), lc.monitor_min_points, below(limit)) is None  # explained
     watch.restart(walk(3))
     for k in range(4, 7):
         assert watch.judge(walk(k), 0, 0.0) is None
-    assert watch.judge((3.6, 0.0, 0.0), lc.monitor_min_points, lc.kidnap_contradiction)[0] == SUSPECT
+    assert watch.judge((3.6, 0.0, 0.0), lc.monitor_min_points, limit)[0] == SUSPECT
     assert watch.judge(walk(8), 0, 1.0) is None  # back on the track: a spike
     assert watch.judge((3.8, 0.0, 0.0), lc.monitor_min_points - 1, 0.0)[0] == SUSPECT  # too few known hits to explain it
     verdict = watch.judge((3.9, 0.0, 0.0), 0, 1.0)  # going on from the suspect frame
     assert verdict[0] == JUMPED and verdict[1].startswith(policy.ODOMETRY_JUMP)
-    for turn, expected in ((np.deg2rad(9.99), None), (np.deg2rad(10.01), SUSPECT)):  # the exact boundary: above
+    min_turn = settings.tracking.odometry_jump_min_turn_deg  # no turn in the window: the limit is min_turn
+    for turn, expected in ((np.deg2rad(min_turn - 0.01), None), (np.deg2rad(min_turn + 0.01), SUSPECT)):  # the exact boundary: above
         watch.restart((0.0, 0.0, 0.0))
         for _ in range(4):
             watch.judge((0.0, 0.0, 0.0), 0, 0.0)

@@ -68,7 +68,7 @@ class OdometryJumpWatch:
             self._last = pose
             return None
         lc = self.settings.localizer
-        explains = known_hits >= lc.monitor_min_points and contradiction < lc.kidnap_contradiction
+        explains = known_hits >= lc.monitor_min_points and contradiction < s.odometry_jump_contradiction
         recent_step, recent_turn = self._recent()
         if not policy.odometry_jumped(step, turn, recent_step, recent_turn, explains, s):
             self._steps.append((step, turn))
