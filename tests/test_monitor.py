@@ -132,3 +132,33 @@ def test_monitor_reference_frames_is_how_far_back_the_usual_share_looks(plan):
     assert m.usual_share(3) == 1.0
     m.wants_global_search(4, IDENTITY, mixed(plan, 40))  # another mode tracked: its own usual share
     assert m.usual_share(3) is None and m.usual_share(4) is None
+
+
+def test_monitor_recovery_share_is_the_bar_after_an_inconsistent_frame(plan):
+    """After a frame below monitor_relative_share of the usual share, a frame is reported
+    consistent again only from monitor_recovery_share of it (a turned sensor in a dense
+    building keeps half its hits near some wall); reaching it ends the doubt. The run of
+    inconsistent frames that starts a kidnap test still counts at the normal bar. Another
+    tracked mode starts without doubt."""
+    base = dict(monitor_distance=0.15, monitor_min_consistency=0.05, monitor_min_points=10, monitor_relative_share=0.5,
+                monitor_frames=2)
+    for bar, expected in ((0.7, True), (np.nextafter(0.7, 1.0), False)):
+        m = monitor(plan, monitor_recovery_share=bar, **base)
+        for _ in range(6):  # usual share 1.0
+            assert not m.wants_global_search(7, IDENTITY, mixed(plan, 40))
+        assert m.frame_consistent(IDENTITY, mixed(plan, 24), mode_id=7) is True  # 0.6: above the normal bar
+        assert not m.wants_global_search(7, IDENTITY, mixed(plan, 10))  # 0.25: inconsistent, one of a run of 2
+        assert m.frame_consistent(IDENTITY, mixed(plan, 10), mode_id=7) is False
+        assert not m.wants_global_search(7, IDENTITY, mixed(plan, 24))  # 0.6: the run ends at the normal bar ...
+        assert m.inconsistent_frames == 0
+        assert m.frame_consistent(IDENTITY, mixed(plan, 24), mode_id=7) is False  # ... but it is not reported consistent
+        assert m.frame_consistent(IDENTITY, mixed(plan, 28), mode_id=7) is expected  # exactly 0.7 of the usual share
+        m.wants_global_search(7, IDENTITY, mixed(plan, 28))
+        assert m.frame_consistent(IDENTITY, mixed(plan, 24), mode_id=7) is expected  # the doubt ended (or not)
+    m = monitor(plan, **base)
+    for _ in range(6):
+        m.wants_global_search(7, IDENTITY, mixed(plan, 40))
+    m.wants_global_search(7, IDENTITY, mixed(plan, 10))
+    for _ in range(6):  # another mode tracked: no doubt carried over
+        m.wants_global_search(8, IDENTITY, mixed(plan, 40))
+    assert m.frame_consistent(IDENTITY, mixed(plan, 24), mode_id=8) is True

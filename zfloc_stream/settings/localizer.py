@@ -29,6 +29,9 @@ class LocalizerSettings(Section):
     # a frame explaining less than this fraction of the tracked mode's usual share (the median
     # over its last monitor_reference_frames consistent frames) is inconsistent too
     monitor_relative_share: float = Field(0.5, ge=0, le=1)
+    # after an inconsistent frame, the bar a frame must reach to be reported consistent
+    # again (hysteresis on what is reported, not on the kidnap run; monitor.py)
+    monitor_recovery_share: float = Field(0.7, ge=0, le=1)
     monitor_reference_frames: int = Field(20, ge=1, le=10_000)
     # a monitor run starts a kidnap test (kidnap_test.py) only if a frame of the last
     # local_frames cut through what older frames saw: this share of its wall hits landed
