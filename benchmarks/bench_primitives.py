@@ -13,7 +13,7 @@ import numpy as np
 from zfloc_stream.config import Settings
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.primitives import extract_circles, extract_lines
-from zfloc_stream.raycast2d import cast_rays
+from zfloc_stream.sim.raycast2d import cast_rays
 from zfloc_stream.rng import make_rng
 
 ROOT = Path(__file__).resolve().parents[1]

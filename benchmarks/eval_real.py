@@ -64,7 +64,6 @@ from zfloc_stream.rng import make_rng
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.prior import Prior
 from zfloc_stream.metrics import is_success, position_errors
-from zfloc_stream.plan_drawing import draw_plan, two_faces, write_plan_dxf
 from zfloc_stream.vector_floorplan import load_vector_floorplan
 from zfloc_stream.sim2 import Sim2
 
@@ -394,8 +393,12 @@ PLAN_COVERAGE = 0.7  # windows whose plan covers at least this share of their hi
 
 def plan_of(floorplan, settings, style: str, log: str, start: int, stop: int):
     """The held-out map of window [start, stop) of a log redrawn as a plan
-    (zfloc_stream.plan_drawing), written as a DXF in metres and loaded through the vector
+    (benchmarks/plan_drawing.py), written as a DXF in metres and loaded through the vector
     path, as a user's `run --floorplan plan.dxf`."""
+    # a sibling module of the benchmarks, found as wrong_map is (the script's folder is on
+    # sys.path); imported here so a test that loads this file by path does not need it
+    from plan_drawing import draw_plan, two_faces, write_plan_dxf
+
     segments = draw_plan(floorplan)
     if style == "two-face":
         segments = two_faces(segments, PLAN_WALL_THICKNESS, heldout_free(log, start, stop, settings))

@@ -88,7 +88,7 @@ def record_laser_session(path, n_frames: int = 30, settings: Settings | None = N
     """Run the real localizer on a simulated 2D laser walk and log it (as the CLI does).
     Returns the estimates."""
     from zfloc_stream.localizer import Localizer
-    from zfloc_stream.raycast2d import RangeSensor2D
+    from zfloc_stream.sim.raycast2d import RangeSensor2D
     from zfloc_stream.rng import make_rng
     from zfloc_stream.sim import build_scene
     from zfloc_stream.sim.trajectory import random_walk

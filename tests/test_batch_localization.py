@@ -25,7 +25,7 @@ from zfloc_stream.estimation import localize
 from zfloc_stream.frames import LaserFrame
 from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.observation import BevObservation
-from zfloc_stream.raycast2d import RangeSensor2D
+from zfloc_stream.sim.raycast2d import RangeSensor2D
 from zfloc_stream.rng import make_rng
 from zfloc_stream.sim.scenes import build_scene
 from zfloc_stream.sim2 import Sim2, wrap_angle

@@ -4,7 +4,7 @@ import pytest
 from zfloc_stream.errors import InputError
 from zfloc_stream.floorplan import Floorplan
 from zfloc_stream.frames import LaserFrame
-from zfloc_stream.raycast2d import RangeSensor2D, beam_angles, cast_rays, to_laser_frame
+from zfloc_stream.sim.raycast2d import RangeSensor2D, beam_angles, cast_rays, to_laser_frame
 
 RES = 0.05
 

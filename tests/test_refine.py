@@ -1,4 +1,4 @@
-"""The LM + Huber refinement (estimation/refine.py, compiled): fits from scattered starts
+"""The LM + Huber refinement (field_fit.py, compiled): fits from scattered starts
 land on the true alignment in every scale mode, with and without the truncated loss; rows
 that cannot be refined come back unchanged; degenerate inputs are handled."""
 

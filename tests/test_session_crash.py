@@ -86,7 +86,7 @@ ENGINE_CHILD = textwrap.dedent(
     import sys
     from zfloc_stream.config import load_settings
     from zfloc_stream.localizer import Localizer
-    from zfloc_stream.raycast2d import RangeSensor2D
+    from zfloc_stream.sim.raycast2d import RangeSensor2D
     from zfloc_stream.rng import make_rng
     from zfloc_stream.session import SessionWriter
     from zfloc_stream.sim import build_scene

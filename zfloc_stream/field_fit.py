@@ -16,11 +16,12 @@ Huber cost decreases (lambda / factor), otherwise lambda * factor and retry. Wit
 refine.outlier_distance > 0 the loss is truncated there (weight 0 beyond it), so points
 that no floorplan wall explains (a room the map lacks, clutter) stop pulling the fit.
 
-The field is given by the caller: localize() passes the wall-SURFACE field
-(scoring.FaceField) rather than the floorplan's f^c, which is 0 inside thick walls and so
-lets a BEV scaled a few percent too large rest inside them. Values are bilinear like
-Floorplan.distance; the Jacobian is analytic: the gradient of the bilinear interpolant
-chained with
+The field is given by the caller: the estimator (estimation/ransac.py, model_generation.py,
+local_refinement.py) passes the wall-SURFACE field (scoring.FaceField) rather than the
+floorplan's f^c, which is 0 inside thick walls and so lets a BEV scaled a few percent too
+large rest inside them; the laser scan matcher (frontend/scan_match.py) passes its own field
+of the BEV's walls. Values are bilinear between cell centres, as in Floorplan.distance; the
+Jacobian is analytic: the gradient of the bilinear interpolant chained with
 d x' / d(tx, ty, theta, log s) = (e_x, e_y, perp(s R x), s R x). In fixed-scale mode
 log s is held constant (3 parameters); otherwise it is clamped to the solvers' scale
 bounds (shrinking the BEV onto one wall would otherwise drive every residual to zero).
@@ -46,11 +47,12 @@ def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
 
 
 def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A distance field (floorplan.distance_field on its grid) at points q (N, 2), exactly
-    as Floorplan.distance computes f^c (bilinear between
-    cell centres; outside the grid the edge value plus the distance to the grid), and its
-    gradient (N, 2) (that of the bilinear interpolant; the outside term is left out), in
-    one pass over the four neighbouring cells."""
+    """A distance field (`floorplan`: anything with distance_field, origin and resolution)
+    at points q (N, 2), interpolated as Floorplan.distance interpolates f^c (bilinear between
+    cell centres; outside the grid the edge value plus the distance to the grid, though with
+    the products in another order, so the last bits may differ), and its gradient (N, 2)
+    (that of the bilinear interpolant; the outside term is left out), in one pass over the
+    four neighbouring cells."""
     value, gu, gv = _field_value_and_gradient_xy(floorplan, q[:, 0], q[:, 1])
     return value, np.stack([gu, gv], axis=1)
 
@@ -134,8 +136,8 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
     (scratch: (5, BLOCK)).
 
     field is the distance field raveled (h rows of w cells); per point, the residual and its
-    gradient are refine._field_value_and_gradient_xy's arithmetic, operation for operation
-    (a float32 field's differences stay float32 as in numpy). Returns NaN (the trial is then
+    gradient are _field_value_and_gradient_xy's arithmetic, operation for operation (a
+    float32 field's differences stay float32, as there). Returns NaN (the trial is then
     rejected) when a transformed point is NaN."""
     s = math.exp(log_s)
     c = math.cos(theta)
@@ -190,7 +192,8 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
             gv = top - bottom
             j = k - start
             scratch[0, j] = r
-            # outside the grid the gradient of the edge-distance term is left out, as in numpy
+            # outside the grid the gradient of the edge-distance term is left out, as in
+            # _field_value_and_gradient_xy
             scratch[1, j] = (gu if u == uc else 0.0) / res
             scratch[2, j] = (gv if v == vc else 0.0) / res
             scratch[3, j] = rx
@@ -215,7 +218,7 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
                 wt = 0.0
                 a = cutoff  # the truncated loss: |r| capped at the cutoff
             cost += 0.5 * a * a if a <= delta else delta * (a - 0.5 * delta)
-            # (J * w) then times J or r, the order of numpy's products
+            # (J * w) first, then times J or r: one fixed order of the products
             w0 = gx * wt
             w1 = gy * wt
             w2 = j2 * wt
@@ -254,8 +257,8 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
 @njit
 def _solve(A, b, n, x):
     """x = A^-1 b for the leading n x n block, by Gaussian elimination with partial
-    pivoting (A and b are overwritten). False on an exactly zero pivot, where LAPACK's
-    solve raises LinAlgError."""
+    pivoting (A and b are overwritten). False on an exactly zero pivot (a singular system:
+    the model's iteration stops there)."""
     for col in range(n):
         piv = col
         for row in range(col + 1, n):
@@ -297,10 +300,10 @@ def _refine_models(field, w, h, ox, oy, res, pts, P, free_scale, lo, hi, delta, 
         tx, ty, theta, log_s = P[m, 0], P[m, 1], P[m, 2], P[m, 3]
         cost = _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, delta, cutoff, H, g, scratch)
         lam = initial_damping
-        evaluations = 1  # per model, as numpy's batch counter is for every model still active
+        evaluations = 1  # per model: each model has its own budget of max_evaluations
         while evaluations < max_evaluations:
-            # numpy's `done`: a non-finite H or every |g| below the tolerance (a NaN in g
-            # fails the test, as NaN < tolerance does in numpy's max)
+            # stop: a non-finite H, or every |g| below the tolerance (a NaN in g counts as
+            # not below it)
             finite = True
             small = True
             for i in range(n):

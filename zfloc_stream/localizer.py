@@ -12,7 +12,7 @@ current best alignment applied to the frame's odometry-plane pose, so every fram
 
 Where and when a round runs (inline, on a worker, joined at fixed frames):
 round_scheduler.py. The consistency monitor (monitor.py) watches each fused frame against
-the tracked alignment; when it stops explaining them, a kidnap test (kidnap_test.py) asks
+the tracked alignment; when it stops explaining them, a kidnap test (kidnap_recovery.py) asks
 whether the sensor is at another place, on what those frames saw alone. The local
 refinement (estimation/local_refinement.py) follows the tracked mode's drift on the recent
 frames' wall hits.
@@ -37,7 +37,7 @@ from .estimation.scoring import scoring_kernels
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import RollingBEV
-from .kidnap_test import KidnapTest, Verdict, better_place
+from .kidnap_recovery import KidnapTest, Verdict, better_place
 from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
 from .odometry_jump import JUMPED, OdometryJumpWatch
@@ -99,7 +99,7 @@ class Localizer:
         self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
         self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
         self._recent_cameras: deque[np.ndarray] = deque(maxlen=self._recent_hits.maxlen)  # each recent frame's plane position
-        self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_test.py)
+        self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_recovery.py)
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
         self._adopted_at = -1  # frame whose kidnap round was adopted last
@@ -268,7 +268,7 @@ class Localizer:
 
     @property
     def kidnap_test(self) -> KidnapTest | None:
-        """The running kidnap test (kidnap_test.py), None when none runs."""
+        """The running kidnap test (kidnap_recovery.py), None when none runs."""
         return self._kidnap
 
     def close(self) -> None:
@@ -375,7 +375,7 @@ class Localizer:
     def _start_kidnap_test(self) -> None:
         """The monitor saw the tracked place stop explaining the frames. If a recent frame
         contradicted what older frames saw, test whether the sensor was carried off
-        (kidnap_test.py); else it walked into what the map lacks, and the next round
+        (kidnap_recovery.py); else it walked into what the map lacks, and the next round
         searches globally on the whole BEV."""
         if self._kidnap is not None:
             return

@@ -1,17 +1,21 @@
-"""Exhaustive correlative search: the brute-force reference for a rigid (known-scale) fit.
+"""Exhaustive correlative search: every rotation and translation of a grid, for a fit at known scale.
 
-Every rotation on a grid (angle_step_deg) and every translation on a grid (cell) is
-scored by how many of the observed wall points land within `tolerance` of a floorplan
-wall: a plain count of matched points, as correlative scan matching does. For each
-rotation the count over all translations is one cross-correlation of the rasterised
-points with the floorplan's "near a wall" mask (cv2.matchTemplate, FFT-based), so the
-search is exact on its grid. The best distinct peaks are then refined with the
-estimator's Levenberg-Marquardt (fixed scale) and re-counted at full resolution.
+Every rotation on a grid (angle_step_deg; `plausible_angles` may mask the ones whose wall
+directions cannot agree) and every translation on a grid (cell) is scored by how many of
+the observed wall points land within `tolerance` of a floorplan wall: a plain count of
+matched points, as correlative scan matching does. For each rotation the count over all
+translations is one cross-correlation of the rasterised points with the floorplan's "near
+a wall" mask, computed with FFTs (scipy.fft; the mask's transform cached per floorplan):
+a float32 pass whose counts must round to their integers, else the float64 pass
+(search_angles), so the search is exact on its grid. correlative_models returns the best
+distinct peaks; correlative_search then refines them with the LM of field_fit.py (fixed
+scale) and re-counts the matched points (thinned to half a cell) at the refined alignment.
 
-It is the yardstick of benchmarks/eval_real.py: what an offline, exhaustive search
-reaches on the same points, against which the online RANSAC localizer is measured.
+Two users: the estimator seeds its global rounds at fixed or prior scale with
+correlative_models (estimation/model_generation.py, estimator.correlative), and
+benchmarks/eval_real.py measures the online localizer against correlative_search, what an
+offline, exhaustive search reaches on the same points.
 """
-
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -303,7 +307,7 @@ def correlative_models_reference(
     distinct_angle_deg: float = 10.0,
 ) -> np.ndarray:
     """correlative_models the plain way (one float64 FFT per angle, every placement counted):
-    what the fast version must reproduce exactly (tests, benchmarks)."""
+    what the fast version must reproduce exactly (tests/test_correlative.py)."""
     pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
     if len(pts) < 3:
         return np.zeros((0, 4))

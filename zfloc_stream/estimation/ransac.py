@@ -3,9 +3,9 @@
 One iteration = one minimal sample of BEV primitives for a solver chosen at random from
 the enabled pool. Without descriptors the floorplan side of a correspondence has to be
 enumerated (paper 3.2, "correspondences must be enumerated exhaustively"); the pruning
-makes that affordable and this module does it with lookup tables built once per floorplan:
+makes that affordable, with lookup tables built once per floorplan (correspondences.py):
 
-  (i)   lines are deduplicated (floorplan: by Floorplan.lines; BEV: here);
+  (i)   lines are deduplicated (floorplan: by Floorplan.lines; BEV: correspondences.BevSamples);
   (ii)  floorplan triplets / pairs are a line and its spatial neighbours
         (Floorplan.line_neighbours), BEV samples likewise (same distance, divided by the
         scale prior); all-parallel triplets and parallel pairs are never sampled;
@@ -28,8 +28,11 @@ Scale modes reduce the pool (see solvers.py): free -> 3L, 2C, LC; prior -> all f
 fixed -> one rigid two-line solver (labelled "2L", standing in for both 3L and 2L), 2C, LC.
 Solvers whose primitives are missing (no circles -> no 2C / LC) are dropped.
 
-Scoring is coarse to fine (scoring.py); the top refine.top_n distinct hypotheses are
-refined (refine.py), rescored with the full C and the list re-ranked and de-duplicated.
+Scoring is coarse to fine (scoring.py: a coarse Cc for every model, the full C for the
+top_k distinct ones); the refine.top_n best of those are refined (field_fit.py: LM +
+Huber, truncated at refine.outlier_distance, on the wall-face field), rescored with the
+full C (a refinement is kept only if it does not lower C), and the list re-ranked and
+de-duplicated.
 
 Input: a BEV with neither lines nor circles is an InputError. A BEV whose primitives
 suit no enabled solver (e.g. two lines at free scale) is not an error: the result simply
@@ -157,7 +160,7 @@ def localize(
     places it names are never crowded out and the best place elsewhere is still known.
 
     Runs its independent pieces on estimator.threads threads (threads.py), unless the
-    caller set the round's thread count already (localizer.run_round)."""
+    caller set the round's thread count already (round_scheduler.run_round)."""
     with threads.limit(threads.resolve(settings.threads), unless_set=True):
         return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search, prior)
 

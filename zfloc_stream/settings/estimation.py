@@ -87,10 +87,14 @@ class ScoringSettings(Section):
     top_k: int = Field(50, ge=1, le=100_000)  # hypotheses re-ranked with the full score
     distinct_translation: float = Field(0.5, ge=0, le=1000)  # m, hypotheses closer than this (and distinct_angle) are one
     distinct_angle_deg: float = Field(10.0, ge=0, le=180)
-    chunk_size: int = Field(1_000_000, ge=1000, le=1_000_000_000)  # (hypotheses x points) elements per vectorised block: bounds memory
+    # (hypotheses x points) elements per block of the torch scorer: bounds its tensors' memory
+    # (the compiled kernels of the numpy backend build no temporaries and ignore it)
+    chunk_size: int = Field(1_000_000, ge=1000, le=1_000_000_000)
     wall_bucket_size: float = Field(2.0, ge=0.1, le=100)  # m, Cv fetches floorplan wall points by buckets of this size (speed only)
-    # where the scores are computed: numpy, or torch (the [torch] extra; estimation/scoring_torch.py,
-    # equal to numpy within one point per hypothesis) on scoring.device (auto: CUDA when present)
+    # where the scores are computed: "numpy" is the CPU path, scoring.py's compiled (numba)
+    # kernels (the name is kept so existing configs stay valid); "torch" is the [torch] extra's
+    # estimation/scoring_torch.py on scoring.device (auto: CUDA when present), equal to the
+    # compiled kernels bit for bit on CPU, within one point in N per hypothesis on a GPU
     backend: Literal["numpy", "torch"] = "numpy"
     device: str = "auto"
 
@@ -98,7 +102,7 @@ class ScoringSettings(Section):
 class RefineSettings(Section):
     huber_delta: float = Field(0.1, gt=0, le=10)  # m
     max_evaluations: int = Field(30, ge=1, le=10_000)  # residual evaluations per hypothesis (converges in ~10)
-    top_n: int = Field(10, ge=1, le=1000)  # hypotheses refined (in one vectorised batch)
+    top_n: int = Field(10, ge=1, le=1000)  # best-ranked hypotheses refined (field_fit.refine_batch, one model at a time)
     max_points: int = Field(1000, ge=10, le=1_000_000)  # BEV wall points used by the refinement (evenly thinned)
     tolerance: float = Field(1e-4, gt=0, le=1)  # stop: relative cost decrease, step or gradient below this
     initial_damping: float = Field(1e-3, gt=0, le=1e6)  # Levenberg-Marquardt lambda at the start

@@ -18,7 +18,7 @@ class LocalizerSettings(Section):
     # checked against the tracked alignment. A run of monitor_frames frames the map does
     # not explain is a part of the building the floorplan lacks, clutter, or another place
     # (a kidnap, an odometry jump, a wrong mode); the monitor cannot tell them apart, so it
-    # drops neither the track nor the BEV: it starts a kidnap test (kidnap_test.py), whose
+    # drops neither the track nor the BEV: it starts a kidnap test (kidnap_recovery.py), whose
     # own filter bank must find a place that explains those frames better, or asks for a
     # global search (kidnap_contradiction).
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
@@ -33,7 +33,7 @@ class LocalizerSettings(Section):
     # again (hysteresis on what is reported, not on the kidnap run; monitor.py)
     monitor_recovery_share: float = Field(0.7, ge=0, le=1)
     monitor_reference_frames: int = Field(20, ge=1, le=10_000)
-    # a monitor run starts a kidnap test (kidnap_test.py) only if a frame of the last
+    # a monitor run starts a kidnap test (kidnap_recovery.py) only if a frame of the last
     # local_frames cut through what older frames saw: this share of its wall hits landed
     # where they saw open space (RollingBEV._contradiction); else it asks for a global
     # search. Carried off, the first frame there puts 0.5-0.99 of its hits in the old

@@ -307,7 +307,7 @@ class LaserSequence:
 
 
 def _laser_ranges(scene: Scene, pose, s: LaserSimSettings, rng) -> tuple[np.ndarray, np.ndarray]:
-    from ..raycast2d import beam_angles, trace
+    from .raycast2d import beam_angles, trace
 
     angles = beam_angles(np.radians(s.fov_deg), s.n_beams)
     world = pose[2] + angles

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
-from .floorplan import Floorplan
-from .frames import LaserFrame
+from ..errors import InputError
+from ..floorplan import Floorplan
+from ..frames import LaserFrame
 
 
 MAX_CROSSINGS_PER_CHUNK = 2_000_000  # memory bound of one traversal batch (not a tuning knob)

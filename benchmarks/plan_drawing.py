@@ -13,7 +13,8 @@ primitives.deduplicate_lines) and pieces still shorter than `min_length` dropped
 fit misses stay missing: a plan drawn from a map is an imperfect plan, as real ones are.
 
 Used by benchmarks/eval_real.py --plan-style to localize against plans of real buildings
-(the Carmen logs' held-out maps) instead of the maps themselves.
+(the Carmen logs' held-out maps) instead of the maps themselves; nothing in the package
+needs it, so it lives beside its one user (tests/test_plan_drawing.py loads it by path).
 """
 
 from __future__ import annotations
@@ -24,11 +25,11 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from .config import LineSettings
-from .floorplan import Floorplan, blob_spans
-from .geometry import LineSet
-from .primitives import deduplicate_lines
-from .vector_floorplan import merge_collinear
+from zfloc_stream.config import LineSettings
+from zfloc_stream.floorplan import Floorplan, blob_spans
+from zfloc_stream.geometry import LineSet
+from zfloc_stream.primitives import deduplicate_lines
+from zfloc_stream.vector_floorplan import merge_collinear
 
 
 def _samples(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
