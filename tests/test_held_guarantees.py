@@ -17,7 +17,7 @@ import pytest
 
 from zfloc_stream.session import read_session
 
-DEMO = [sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", "rooms", "--frames", "400", "--no-progress"]
+DEMO = [sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", "rooms", "--frames", "3000", "--no-progress"]  # never done before the signal
 
 
 def _stopped_demo(out: Path, sig: int, after_rows: int) -> tuple[int, str, int, int]:

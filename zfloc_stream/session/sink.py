@@ -53,14 +53,16 @@ class RecordSink:
     def error(self) -> BaseException | None:
         return self._error
 
-    def submit(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False) -> None:
+    def submit(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False, then=None) -> None:
         """Queue (or write) one batch; raises the worker's failure if one happened.
-        close_chunk_after: the chunk ends with this batch (a frame is complete)."""
+        close_chunk_after: the chunk ends with this batch (a frame is complete). then: called
+        (on the writing thread) once the batch is handed to the OS: outputs that must never
+        be ahead of the log (trajectory.csv) are written there."""
         self._raise_pending()
         if self._queue is None:
-            self._apply(batch, close_chunk_first, close_chunk_after)
+            self._apply(batch, close_chunk_first, close_chunk_after, then)
         else:
-            self._queue.put((batch, close_chunk_first, close_chunk_after))  # blocks while max_pending are queued
+            self._queue.put((batch, close_chunk_first, close_chunk_after, then))  # blocks while max_pending are queued
 
     def finish(self) -> None:
         """Write everything queued, then the MCAP summary and footer."""
@@ -95,7 +97,7 @@ class RecordSink:
                 except BaseException as err:  # noqa: BLE001 - re-raised on the caller's thread
                     self._error = err
 
-    def _apply(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False) -> None:
+    def _apply(self, batch: list[Record], close_chunk_first: bool, close_chunk_after: bool = False, then=None) -> None:
         if close_chunk_first:
             self._mcap.flush()  # finish the chunk in progress: bounds what a crash can lose
         for rec in batch:
@@ -103,6 +105,8 @@ class RecordSink:
         if close_chunk_after and batch:
             self._mcap.flush()  # the frame just completed is in a finished chunk: a kill cannot lose it
         self._file.flush()  # finished chunks reach the OS: they survive a killed process
+        if then is not None:
+            then()
 
     def _channel(self, rec: Record) -> int:
         key = (rec.topic, rec.schema_name, rec.metadata)

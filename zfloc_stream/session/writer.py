@@ -236,13 +236,13 @@ class SessionWriter:
         self._frames_in_chunk += 1
         self.frames_written += 1
 
-    def _submit(self, close_after: bool = False) -> None:
+    def _submit(self, close_after: bool = False, then=None) -> None:
         batch, self._batch = self._batch, []
         close, self._close_chunk_first = self._close_chunk_first, False
         for listener in self._listeners:
             listener(batch)
         try:
-            self._sink.submit(batch, close, close_after)
+            self._sink.submit(batch, close, close_after, then)
         except OSError as err:
             self._failed = True
             raise SessionLogError(f"{self.path}: writing the session failed: {err.strerror or err}") from None
@@ -283,9 +283,11 @@ class SessionWriter:
         return laser_frame_from_msgs(scan, float(frame.range_min), float(frame.range_max), odom, gt, "x", S.ns_to_seconds(ns))
 
     # --- outputs ------------------------------------------------------------------------
-    def write_estimate(self, estimate: Estimate, bev=None) -> None:
+    def write_estimate(self, estimate: Estimate, bev=None, then=None) -> None:
         """Log the localizer's output for the frame just written. `bev`: a Localizer, a
-        RollingBEV or a BevGrid; published every `logging.bev_every_n_frames` frames."""
+        RollingBEV or a BevGrid; published every `logging.bev_every_n_frames` frames.
+        then: called once these records are handed to the OS (on the writing thread with
+        `logging.background`): a per-frame output written there is never ahead of the log."""
         self._check_open()
         ns = self._estimate_ns(estimate)
         seq = int(estimate.frame)
@@ -307,7 +309,7 @@ class SessionWriter:
         full = self._frames_in_chunk >= self._cfg.chunk_max_frames
         if full:
             self._frames_in_chunk = 0
-        self._submit(close_after=full)
+        self._submit(close_after=full, then=then)
 
     def _estimate_ns(self, estimate: Estimate) -> int:
         # Same log time as its frame's messages, even where float seconds cannot hold ns.

@@ -9,6 +9,7 @@ import time
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +101,13 @@ class SessionOutcome:
                             stat(lambda v: run_rmse(v, last=v.size)), int((posed > threshold).sum()), by_status)
 
 
+def _write_rows(csv_writer: TrajectoryCsvWriter, tum_writer: TumWriter, truth_writer: TumWriter, est: Estimate, truth) -> None:
+    """One frame's rows in trajectory.csv, trajectory.tum and the ground-truth TUM."""
+    csv_writer.write(est)
+    tum_writer.write(est)
+    truth_writer.write_pose(est.timestamp, truth)
+
+
 def run_session(
     floorplan: Floorplan,
     frames: Iterable,
@@ -161,10 +169,9 @@ def run_session(
             t0 = time.perf_counter()
             est = localizer.push(frame)
             push_seconds.append(time.perf_counter() - t0)
-            log.write_estimate(est, localizer)
-            csv_writer.write(est)
-            tum_writer.write(est)
-            truth_writer.write_pose(est.timestamp, frame.ground_truth)
+            # the frame's rows once session.mcap holds it: a killed run never shows a frame
+            # in trajectory.csv that its log lacks (the log is written on a worker thread)
+            log.write_estimate(est, localizer, then=partial(_write_rows, csv_writer, tum_writer, truth_writer, est, frame.ground_truth))
             if ros2_writer is not None:
                 ros2_writer.write(stamp, est, frame.ground_truth)
             if est.skipped is not None:
