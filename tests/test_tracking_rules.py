@@ -320,22 +320,40 @@ def test_odometry_jump_watch_judges_a_full_window_asks_the_bev_and_lets_the_next
     def walk(k):
         return (0.1 * k, 0.0, 0.0)
 
-    assert [watch.judge(walk(k), 0, 1.0) for k in range(4)] == [None] * 4  # first pose, then 3 steps filling the window
-    assert watch.judge((3.3, 0.0, 0.0), lc.monitor_min_points, below(limit)) is None  # explained
+    assert [watch.judge(walk(k), 0, 1.0, 100) for k in range(4)] == [None] * 4  # first pose, then 3 steps filling the window
+    assert watch.judge((3.3, 0.0, 0.0), lc.monitor_min_points, below(limit), lc.monitor_min_points) is None  # explained
     watch.restart(walk(3))
     for k in range(4, 7):
-        assert watch.judge(walk(k), 0, 0.0) is None
-    assert watch.judge((3.6, 0.0, 0.0), lc.monitor_min_points, limit)[0] == SUSPECT
-    assert watch.judge(walk(8), 0, 1.0) is None  # back on the track: a spike
-    assert watch.judge((3.8, 0.0, 0.0), lc.monitor_min_points - 1, 0.0)[0] == SUSPECT  # too few known hits to explain it
-    verdict = watch.judge((3.9, 0.0, 0.0), 0, 1.0)  # going on from the suspect frame
+        assert watch.judge(walk(k), 0, 0.0, 100) is None
+    assert watch.judge((3.6, 0.0, 0.0), lc.monitor_min_points, limit, lc.monitor_min_points)[0] == SUSPECT
+    assert watch.judge(walk(8), 0, 1.0, 100) is None  # back on the track: a spike
+    assert watch.judge((3.8, 0.0, 0.0), lc.monitor_min_points - 1, 0.0, lc.monitor_min_points - 1)[0] == SUSPECT  # too few known hits to explain it
+    verdict = watch.judge((3.9, 0.0, 0.0), 0, 1.0, 100)  # going on from the suspect frame
     assert verdict[0] == JUMPED and verdict[1].startswith(policy.ODOMETRY_JUMP)
     min_turn = settings.tracking.odometry_jump_min_turn_deg  # no turn in the window: the limit is min_turn
     for turn, expected in ((np.deg2rad(min_turn - 0.01), None), (np.deg2rad(min_turn + 0.01), SUSPECT)):  # the exact boundary: above
         watch.restart((0.0, 0.0, 0.0))
         for _ in range(4):
-            watch.judge((0.0, 0.0, 0.0), 0, 0.0)
-        verdict = watch.judge((0.0, 0.0, turn), 0, 1.0)
+            watch.judge((0.0, 0.0, 0.0), 0, 0.0, 100)
+        verdict = watch.judge((0.0, 0.0, turn), 0, 1.0, 100)
         assert (verdict if verdict is None else verdict[0]) == expected
     off = OdometryJumpWatch(Settings(tracking={"odometry_jump_window": 0}))
-    assert [off.judge((1e3 * k, 0.0, 0.0), 0, 1.0) for k in range(20)] == [None] * 20
+    assert [off.judge((1e3 * k, 0.0, 0.0), 0, 1.0, 100) for k in range(20)] == [None] * 20
+
+
+def test_odometry_jump_min_known_share_is_the_seen_part_a_step_needs():
+    """A step past the gate is explained only when at least odometry_jump_min_known_share of
+    the frame's wall hits land on cells older frames saw (a camera turned 90 deg into rooms
+    nobody saw: 49 of 9,885 hits), however few of those contradict them."""
+    from zfloc_stream.config import Settings
+    from zfloc_stream.odometry_jump import SUSPECT, OdometryJumpWatch
+
+    settings = Settings(tracking={"odometry_jump_window": 3, "odometry_jump_min_known_share": 0.25})
+    lc = settings.localizer
+    for hits, expected in ((4 * 200, None), (4 * 200 + 1, SUSPECT)):  # 200 known hits: exactly 0.25, then below
+        watch = OdometryJumpWatch(settings)
+        for k in range(4):
+            watch.judge((0.1 * k, 0.0, 0.0), 0, 0.0, 100)
+        assert 200 >= lc.monitor_min_points
+        verdict = watch.judge((3.3, 0.0, 0.0), 200, 0.0, hits)
+        assert (verdict if verdict is None else verdict[0]) == expected

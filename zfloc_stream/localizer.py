@@ -199,7 +199,7 @@ class Localizer:
         if self.bev.frames_fused != self._bev_fused_before + 1:
             self.jumps.restart(plane_pose)
             return None
-        return self.jumps.judge(plane_pose, self.bev.last_known_hits, self.bev.last_contradiction)
+        return self.jumps.judge(plane_pose, self.bev.last_known_hits, self.bev.last_contradiction, len(self.bev.last_wall_hits))
 
     def _restart_after_jump(self, frame, index: int) -> np.ndarray:
         """The odometry jumped (tracking_policy.ODOMETRY_JUMP): the map and every

@@ -45,10 +45,10 @@ class OdometryJumpWatch:
         self._last = np.asarray(plane_pose, dtype=float).copy()
         self._suspect = None
 
-    def judge(self, plane_pose, known_hits: int, contradiction: float) -> tuple[str, str] | None:
+    def judge(self, plane_pose, known_hits: int, contradiction: float, hits: int) -> tuple[str, str] | None:
         """Judge one fused frame (plane pose (x, y, yaw); known_hits and contradiction: its
         wall hits on cells older frames saw, and the share of those contradicting them,
-        RollingBEV.last_known_hits / last_contradiction): None (a step the sensor made),
+        RollingBEV.last_known_hits / last_contradiction; hits: all its wall hits): None (a step the sensor made),
         (SUSPECT, why) or (JUMPED, why). Judged once odometry_jump_window steps are known;
         a suspect frame's step never enters the recent motion."""
         s = self.settings.tracking
@@ -68,7 +68,8 @@ class OdometryJumpWatch:
             self._last = pose
             return None
         lc = self.settings.localizer
-        explains = known_hits >= lc.monitor_min_points and contradiction < s.odometry_jump_contradiction
+        explains = (known_hits >= max(lc.monitor_min_points, s.odometry_jump_min_known_share * hits)
+                    and contradiction < s.odometry_jump_contradiction)
         recent_step, recent_turn = self._recent()
         if not policy.odometry_jumped(step, turn, recent_step, recent_turn, explains, s):
             self._steps.append((step, turn))

@@ -77,14 +77,16 @@ class TrackingSettings(Section):
     # than odometry_jump_min_step + odometry_jump_factor x the longest of the last
     # odometry_jump_window steps (or a turn likewise), whose wall hits the BEV does not
     # explain, restarts the map and the hypotheses (status lost). 0 frames: never judged.
-    # Not explained: fewer than localizer.monitor_min_points hits on cells older frames
-    # saw, or at least odometry_jump_contradiction of them where those frames saw open
-    # space. Measured (gate 1.5 m / 15 deg): ordinary frames of the shared Carmen logs
-    # (1-3.3 m and up to 82 deg a frame, glass and clutter) contradict up to 0.40, of the
-    # built-in walks up to 0.49; a 1 m / 10 deg gate let Carmen turns restart the map (25
-    # false jumps in 40 windows of 100 scans, SR@1m 69% -> 64%).
+    # Not explained: fewer than localizer.monitor_min_points (or odometry_jump_min_known_share
+    # of the frame's wall hits) on cells older frames saw, or at least
+    # odometry_jump_contradiction of them where those frames saw open space. Measured on
+    # frames past the gate: ordinary frames of the shared Carmen windows (1-3.3 m and up to
+    # 82 deg a frame, glass and clutter) contradict up to 0.31 and land >= 0.49 (laser) /
+    # 0.73 (camera) of their hits on seen cells; built-in walks >= 0.43 on seen cells. A
+    # 1 m / 10 deg / x1 gate with 0.15 let Carmen turns restart the map (SR@1m 69% -> 64%).
     odometry_jump_window: int = Field(10, ge=0, le=10_000)  # frames of recent motion it is compared with (0: off)
     odometry_jump_min_step: float = Field(1.5, ge=0, le=1e6)  # m
     odometry_jump_min_turn_deg: float = Field(15.0, ge=0, le=360)
     odometry_jump_factor: float = Field(1.5, ge=0, le=1e6)
     odometry_jump_contradiction: float = Field(0.6, ge=0, le=1)
+    odometry_jump_min_known_share: float = Field(0.25, ge=0, le=1)
