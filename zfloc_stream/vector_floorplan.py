@@ -47,9 +47,10 @@ from .documents import real_number
 from .errors import FloorplanError
 from .floorplan import Floorplan
 from .raster_files import check_plan_budget, coarsening, coarsening_warning
-from .geometry import CircleSet, LineSet, deduplicate_lines
+from .geometry import CircleSet, LineSet
 from .plan_readers import ARC_CHORD, CIRCLE_FIT_TOLERANCE, MIN_CIRCLE_VERTICES, VECTOR_SUFFIXES, VectorGeometry, read_dxf, read_geojson, read_svg
 from .segment_merging import merge_collinear
+from .segment_pairs import deduplicate_lines
 
 def _ring_circle(ring: np.ndarray, max_radius: float) -> tuple[float, float, float] | None:
     """(cx, cy, r) when a closed ring's vertices lie on a circle no larger than a pillar."""
