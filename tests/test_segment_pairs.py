@@ -140,3 +140,39 @@ def test_a_large_scatter_costs_its_pairs_not_n_squared():
         assert np.array_equal(lists[i], want[want != i])
     kept = deduplicate_lines(LineSet.from_endpoints(e), Settings().primitives.lines)
     assert 0 < len(kept) <= len(e)
+
+
+@pytest.mark.filterwarnings("ignore:.*gives no units")
+def test_line_only_dxf_fast_reader_equals_ezdxf(tmp_path, monkeypatch):
+    """plan_readers._dxf_lines_only (the group codes read directly) gives ezdxf's geometry
+    for a LINE-only drawing, in every unit, and hands anything else to ezdxf."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from fuzz_inputs import write_dxf
+    from plan_bombs import dxf_pieces
+
+    from zfloc_stream import plan_readers
+
+    rng = np.random.default_rng(5)
+    lines = [((float(a), float(b)), (float(c), float(d))) for a, b, c, d in rng.uniform(0, 2000, (300, 4))] + [((1, 1), (1, 1))]
+    cases = [write_dxf(tmp_path / f"u{u}.dxf", lines, u) for u in (None, 0, 1, 4, 5, 6, 21)] + [dxf_pieces(tmp_path / "pieces.dxf", 2000, seed=1)]
+    for path in cases:
+        assert plan_readers._dxf_lines_only(path) is not None, path
+        fast = plan_readers.read_dxf(path, None, None, None)
+        monkeypatch.setattr(plan_readers, "_dxf_lines_only", lambda p: None)
+        slow = plan_readers.read_dxf(path, None, None, None)
+        monkeypatch.undo()
+        assert len(fast.polylines) == len(slow.polylines) and not fast.rings and not fast.circles
+        assert all(np.array_equal(a, b) for a, b in zip(fast.polylines, slow.polylines)), path
+    # not LINE-only, paper space, a bad number, binary: ezdxf's
+    assert plan_readers._dxf_lines_only(write_dxf(tmp_path / "c.dxf", lines[:3], 6, circles=[(5, 5, 0.3)])) is None
+    paper = (tmp_path / "u6.dxf").read_text().replace("LINE\n8\nWALLS", "LINE\n67\n1\n8\nWALLS", 1)
+    assert plan_readers._dxf_lines_only(write_dxf(tmp_path / "e.dxf", [], 6)) is None
+    (tmp_path / "p.dxf").write_text(paper)
+    assert plan_readers._dxf_lines_only(tmp_path / "p.dxf") is None
+    write_dxf(tmp_path / "n.dxf", [((float("nan"), 0.0), (1.0, 1.0))] + lines[:3], 6)
+    assert plan_readers._dxf_lines_only(tmp_path / "n.dxf") is None
+    (tmp_path / "b.dxf").write_bytes(b"AutoCAD Binary DXF\r\n\x1a\x00")
+    assert plan_readers._dxf_lines_only(tmp_path / "b.dxf") is None
