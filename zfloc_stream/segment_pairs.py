@@ -106,9 +106,19 @@ def _rows(r0, r1, lo, hi, threshold, later_only, e, reach, x0, y0, cell, nx, ny,
         for cy in range(_cell_range(lo[i, 1] - t, y0, cell, ny), _cell_range(hi[i, 1] + t, y0, cell, ny) + 1):
             for cx in range(_cell_range(lo[i, 0] - t, x0, cell, nx), _cell_range(hi[i, 0] + t, x0, cell, nx) + 1):
                 c = cy * nx + cx
-                for s in range(start[c], start[c + 1]):
+                first_item = start[c]
+                if later_only:  # a cell's items ascend (registered in index order): skip to those after i
+                    lo_k, hi_k = start[c], start[c + 1]
+                    while lo_k < hi_k:
+                        mid = (lo_k + hi_k) >> 1
+                        if items[mid] <= i:
+                            lo_k = mid + 1
+                        else:
+                            hi_k = mid
+                    first_item = lo_k
+                for s in range(first_item, start[c + 1]):
                     j = items[s]
-                    if j == i or (later_only and j < i):
+                    if j == i:
                         continue
                     word, bit = j >> 6, np.uint64(1) << np.uint64(j & 63)
                     if bits[word] & bit:
