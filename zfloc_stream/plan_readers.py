@@ -55,7 +55,8 @@ class VectorGeometry:
 
     def check_reach(self, source) -> None:
         """After scaling to metres: every coordinate within MAX_COORDINATE of 0."""
-        reach = max([0.0] + [float(np.abs(p).max()) for p in (*self.polylines, *self.rings) if len(p)]
+        shapes = [p for p in (*self.polylines, *self.rings) if len(p)]
+        reach = max([0.0] + ([float(np.abs(np.concatenate(shapes)).max())] if shapes else [])
                     + [abs(x) + r for x, _, r in self.circles] + [abs(y) + r for _, y, r in self.circles])
         if not math.isfinite(reach) or reach > MAX_COORDINATE:
             raise FloorplanError(f"{source}: the drawing reaches {reach:.3g} m from 0 (more than {MAX_COORDINATE:.0e} m): "

@@ -75,7 +75,16 @@ class _Primitives:
 
 
 def _segments(polylines) -> np.ndarray:
-    return np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in polylines]) if polylines else np.zeros((0, 2, 2))
+    """(N, 2, 2) consecutive point pairs of every polyline, in order: one concatenation,
+    not an array per polyline (100,000 LINEs)."""
+    if not polylines:
+        return np.zeros((0, 2, 2))
+    points = np.concatenate(polylines)
+    last = np.cumsum([len(p) for p in polylines]) - 1  # each polyline's last point
+    pair = np.ones(max(len(points) - 1, 0), dtype=bool)  # a pair starts at every point but a polyline's last
+    pair[last[:-1]] = False
+    starts = np.flatnonzero(pair)
+    return np.stack([points[starts], points[starts + 1]], axis=1)
 
 
 def _ring_width(ring: np.ndarray) -> float:
