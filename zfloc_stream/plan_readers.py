@@ -431,8 +431,10 @@ def _svg_elements(svg, se, path: Path, scale: float, geometry: VectorGeometry) -
                 centre = m.point_in_matrix_space((element.cx, element.cy))
                 geometry.add_circle(centre.x, centre.y, element.rx * math.sqrt(abs(m.a * m.d - m.b * m.c)), what)
             elif isinstance(element, se.Shape):
-                # reify leaves a rotation or skew on rects and ellipses: abs() applies it
-                for sub in abs(se.Path(element)).as_subpaths():
+                # reify leaves a rotation or skew on rects and ellipses: abs() applies it (a
+                # copy of every segment: a path reify has already placed is read as it is)
+                placed = isinstance(element, se.Path) and element.transform.is_identity()
+                for sub in (element if placed else abs(se.Path(element))).as_subpaths():
                     sub = se.Path(sub)
                     points, closed = [], False
                     for seg in sub:
