@@ -194,14 +194,18 @@ def _dxf_lines_only(path: Path) -> tuple[int, np.ndarray] | None:
         lines.pop()
     if len(lines) % 2:
         return None
-    codes, values = lines[0::2], lines[1::2]
+    try:
+        codes = list(map(int, lines[0::2]))  # every group code an integer, or not a DXF this scan reads
+    except ValueError:
+        return None
+    values = lines[1::2]
     n = len(codes)
     units = 0  # ezdxf's header.get("$INSUNITS", 0) for a header without it
     ends: list[float] = []
     try:
         i = 0
         while i < n:
-            code, value = int(codes[i]), values[i].strip()
+            code, value = codes[i], values[i].strip()
             if code == 999:  # a comment
                 i += 1
                 continue
@@ -209,14 +213,14 @@ def _dxf_lines_only(path: Path) -> tuple[int, np.ndarray] | None:
                 return None
             if value == b"EOF":
                 break
-            if value != b"SECTION" or i + 1 >= n or int(codes[i + 1]) != 2 or values[i + 1].strip() not in _DXF_SECTIONS:
+            if value != b"SECTION" or i + 1 >= n or codes[i + 1] != 2 or values[i + 1].strip() not in _DXF_SECTIONS:
                 return None
             name = values[i + 1].strip()
             i += 2
-            while i < n and not (codes[i].strip() == b"0" and values[i].strip() == b"ENDSEC"):
-                code = int(codes[i])
+            while i < n and not (codes[i] == 0 and values[i].strip() == b"ENDSEC"):
+                code = codes[i]
                 if name == b"HEADER" and code == 9 and values[i].strip() == b"$INSUNITS":
-                    if i + 1 >= n or int(codes[i + 1]) != 70:
+                    if i + 1 >= n or codes[i + 1] != 70:
                         return None
                     units = int(values[i + 1])
                     i += 2
@@ -226,8 +230,8 @@ def _dxf_lines_only(path: Path) -> tuple[int, np.ndarray] | None:
                         return None
                     point = {}
                     i += 1
-                    while i < n and codes[i].strip() != b"0":
-                        c = int(codes[i])
+                    while i < n and codes[i] != 0:
+                        c = codes[i]
                         if c in (10, 20, 11, 21, 30, 31):
                             if c in point:
                                 return None
@@ -259,7 +263,9 @@ def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_0
         if fast is not None:
             units, segments = fast
             factor = _dxf_units(units, path, scale)
-            geometry = VectorGeometry(polylines=list(segments)).scaled(factor)  # as ezdxf's LINE paths: (start, end)
+            # as ezdxf's LINE paths, (start, end), scaled as VectorGeometry.scaled scales them (one product, not 100,000)
+            with np.errstate(over="ignore"):
+                geometry = VectorGeometry(polylines=list(segments * np.array([factor, factor])))
             geometry.check_reach(path)
             if scale is None:
                 geometry.check_span(path, _dxf_unit_name(units))
