@@ -14,6 +14,7 @@ everything a floorplan computes on construction), then the RANSAC per-plan table
     python benchmarks/bench_plan_load.py --set floorplan.max_triplets=500000
     python benchmarks/bench_plan_load.py --large 300 --log fhw   # issue 43: a 300 x 300 m raster
     python benchmarks/bench_plan_load.py --large 300 --vector    # the same floor as a DXF
+    python benchmarks/bench_plan_load.py --honest                # issue 44: large honest drawings
 
 --large S: a S x S m floor of the same kind drawn at 0.05 m (a raster of (S/0.05)^2 cells),
 loaded with the default settings as a ROS map (pooled to floorplan.max_cells when larger):
@@ -22,11 +23,22 @@ memory (ru_maxrss, the whole process: imports, kernels, the image). --log L: the
 instead the whole-log maps of the shared Carmen logs (../shared/data/carmen/) tiled over
 it, L's own map once in its corner (large_plan), and L's first --frames scans (drifting
 odometry, fixed scale) are played on the whole plan: `tracking` frames and their error.
+
+--honest: issue 44's large but honest drawings (tests/plan_bombs.py, fixed seeds): a DXF of
+100,000 short LINEs scattered in a 50 m square (scatter), a DXF of 100,000 LINE pieces of
+walls on a 2 m grid in a 50 m square (pieces), one SVG path of 200,000 segments (path200k).
+Each is loaded (load_floorplan, default settings) in a fresh process, so its peak RSS is
+its own: wall and CPU seconds of the load, then of the estimator's RANSAC tables on first
+use (floorplan_matches), and the process's peak RSS. Goal: load <= 10 s, peak <= 2 GiB.
+--families picks some, --size scales their counts (--size 0.1: 10,000 lines).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -41,6 +53,7 @@ from zfloc_stream.estimation.correspondences import floorplan_matches
 from zfloc_stream.floorplan import Floorplan, write_ros_map
 from zfloc_stream.plan_loading import load_floorplan
 from zfloc_stream.rng import make_rng
+from zfloc_stream.vector_floorplan import load_vector_floorplan
 
 WIDTH, HEIGHT = 248.0, 240.0  # m
 BAND = 17.0  # m: rooms 6.5 m deep either side of a 4 m corridor
@@ -190,6 +203,59 @@ def large_main(args, settings, out: Path) -> int:
     return 0
 
 
+HONEST = {  # family: (generator, its count at size 1, file suffix, scale)
+    "scatter": ("dxf_scatter", 100_000, ".dxf", None),
+    "pieces": ("dxf_pieces", 100_000, ".dxf", None),
+    "path200k": ("svg_long_path", 200_000, ".svg", 0.01),
+}
+
+
+def honest_one(path: Path, scale: float | None, tables: bool) -> dict:
+    """In this (fresh) process: the drawing's load, then its RANSAC tables; peak RSS."""
+    import resource
+
+    settings = load_settings()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
+    plan, t_load = timed(lambda: load_vector_floorplan(path, settings, scale=scale))  # what load_floorplan calls, with --scale
+    peak_load = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
+    out = {"load_wall": t_load[0], "load_cpu": t_load[1], "peak_load": peak_load, "before": before,
+           "lines": len(plan.lines), "circles": len(plan.circles), "neighbour_pairs": int(sum(len(nb) for nb in plan.line_neighbours))}
+    if tables:
+        _, t_tables = timed(lambda: floorplan_matches(plan, settings.estimator.solvers))
+        out.update(tables_wall=t_tables[0], tables_cpu=t_tables[1], peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10)
+    return out
+
+
+def honest_main(args, out: Path) -> int:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import plan_bombs
+
+    print("| family | drawing | lines, circles kept | load wall s | load CPU s | peak RSS MiB (load) | RANSAC tables wall s | peak RSS MiB |")
+    print("|---|---|---|---|---|---|---|---|")
+    worst = 0.0
+    for name in args.families.split(","):
+        generator, count, suffix, scale = HONEST[name]
+        n = max(int(count * args.size), 10)
+        path = getattr(plan_bombs, generator)(out / f"{name}{suffix}", n, **({"seed": args.seed} if suffix == ".dxf" else {}))
+        cmd = [sys.executable, __file__, "--honest-one", str(path), "--scale", str(scale or 0)] + (["--no-tables"] if args.no_tables else [])
+        try:
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout, env=dict(os.environ))
+        except subprocess.TimeoutExpired:
+            print(f"| {name} | {n:,} {'segments' if suffix == '.svg' else 'LINEs'} | | > {args.timeout:.0f} (killed) | | | | |")
+            worst = float("inf")
+            continue
+        if run.returncode != 0:
+            print(f"| {name} | failed: {run.stderr.strip().splitlines()[-1:]} |")
+            worst = float("inf")
+            continue
+        r = json.loads(run.stdout.strip().splitlines()[-1])
+        worst = max(worst, r["load_wall"])
+        tables = f"{r['tables_wall']:.2f} | {r['peak']:.0f}" if "tables_wall" in r else "- | -"
+        print(f"| {name} | {n:,} {'segments' if suffix == '.svg' else 'LINEs'} | {r['lines']:,}, {r['circles']} ({r['neighbour_pairs']:,} neighbour pairs) | "
+              f"{r['load_wall']:.2f} | {r['load_cpu']:.2f} | {r['peak_load']:.0f} | {tables} |")
+    return 0 if worst <= 10.0 else 1
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=0)
@@ -200,12 +266,24 @@ def main(argv=None) -> int:
     parser.add_argument("--log", help="with --large: a Carmen log whose map is placed in the plan and whose scans are played on it")
     parser.add_argument("--vector", action="store_true", help="with --large (no --log): the floor as a DXF drawing, not a raster")
     parser.add_argument("--frames", type=int, default=150, help="with --log: scans played")
+    parser.add_argument("--honest", action="store_true", help="instead: issue 44's large honest drawings, each in a fresh process")
+    parser.add_argument("--families", default=",".join(HONEST), help="with --honest: which (comma-separated)")
+    parser.add_argument("--size", type=float, default=1.0, help="with --honest: counts times this")
+    parser.add_argument("--no-tables", action="store_true", help="with --honest: the load only, not the RANSAC tables")
+    parser.add_argument("--timeout", type=float, default=300.0, help="with --honest: seconds per family before it is killed")
+    parser.add_argument("--honest-one", type=Path, help=argparse.SUPPRESS)  # the child process of --honest
+    parser.add_argument("--scale", type=float, default=0.0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.honest_one:
+        print(json.dumps(honest_one(args.honest_one, args.scale or None, not args.no_tables)))
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         out = args.keep if args.keep is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         if args.large:
             return large_main(args, load_settings(overrides=args.set), out)
+        if args.honest:
+            return honest_main(args, out)
         segments, pillars = building_segments(args.seed)
         dxf = write_dxf(segments, pillars, out / "building.dxf")
         settings = load_settings(overrides=args.set)

@@ -51,29 +51,6 @@ from .raster_files import (
 )
 from .rng import make_rng
 
-def _segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
-    """Minimum distance between segments a (a0 -> a1) and b, element-wise over arrays of
-    shape (..., 2) that broadcast together; 0 where they cross."""
-
-    def point_to_segment(p, s0, s1):
-        d = s1 - s0
-        t = np.clip(np.sum((p - s0) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-18), 0.0, 1.0)
-        return np.linalg.norm(p - (s0 + t[..., None] * d), axis=-1)
-
-    dist = np.minimum.reduce(
-        [point_to_segment(a0, b0, b1), point_to_segment(a1, b0, b1), point_to_segment(b0, a0, a1), point_to_segment(b1, a0, a1)]
-    )
-
-    def cross(u, v):
-        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-    da, db = a1 - a0, b1 - b0
-    c1, c2 = cross(da, b0 - a0), cross(da, b1 - a0)
-    c3, c4 = cross(db, a0 - b0), cross(db, a1 - b0)
-    crossing = (c1 * c2 < 0) & (c3 * c4 < 0)
-    return np.where(crossing, 0.0, dist)
-
-
 def _distance_field(occupied: np.ndarray, resolution: float) -> np.ndarray:
     """Exact Euclidean distance (metres) from every cell centre to the nearest wall cell
     centre. OpenCV's exact transform (Felzenszwalb) is ~10x faster than scipy's on a large
@@ -363,31 +340,14 @@ class Floorplan:
         return extract_circles(self.face_points[blob], cfg.primitives.circles, make_rng(cfg.seed, "floorplan-circles"))
 
     @cached_property
-    def line_neighbour_matrix(self) -> np.ndarray:
-        """(N, N) bool: segment-to-segment distance < neighbour_distance (diagonal False).
-        Only pairs whose bounding boxes come within that distance on both axes are measured
-        (a large plan's lines are mostly far apart), blocks of rows at a time."""
-        e = self.lines.endpoints
-        n = len(e)
-        reach = self.settings.floorplan.neighbour_distance
-        lo, hi = e.min(axis=1), e.max(axis=1)
-        near = np.zeros((n, n), dtype=bool)
-        block = 256  # rows per block: bounds the (block, N, 2) temporaries on big floorplans
-        for i in range(0, n, block):
-            # the boxes' gap along each axis bounds the segments' distance from below; the
-            # margin keeps a pair whose distance rounds to just under reach
-            gap = np.maximum(lo[None, :, :] - hi[i : i + block, None, :], lo[i : i + block, None, :] - hi[None, :, :])
-            rows, cols = np.nonzero(gap.max(axis=2) < reach * (1 + 1e-9) + 1e-9)
-            rows += i
-            d = _segment_distances(e[rows, 0], e[rows, 1], e[cols, 0], e[cols, 1])
-            near[rows, cols] = d < reach
-        np.fill_diagonal(near, False)
-        return near
-
-    @cached_property
     def line_neighbours(self) -> list[np.ndarray]:
-        """For each line, indices of the lines within neighbour_distance of it."""
-        return [np.flatnonzero(row) for row in self.line_neighbour_matrix]
+        """For each line, the ascending indices (int32) of the lines within
+        floorplan.neighbour_distance of it (segment distance; 0 where two cross), itself
+        excluded. Lists, not an (N, N) matrix: a drawing of 100,000 short lines keeps
+        ~58,000 of them (segment_pairs.py)."""
+        from .segment_pairs import segment_neighbours  # compiled (numba): imported when first needed
+
+        return segment_neighbours(self.lines.endpoints, self.settings.floorplan.neighbour_distance)
 
     def sample_wall_points(self, spacing: float | None = None, faces_only: bool = True) -> np.ndarray:
         """Wall points thinned to about one per spacing x spacing (default

@@ -91,39 +91,3 @@ def grid_subsample(points: np.ndarray, spacing: float) -> np.ndarray:
     sorted_cells = cells[order]
     first = np.r_[True, np.any(sorted_cells[1:] != sorted_cells[:-1], axis=1)]
     return points[np.sort(order[first])]
-
-
-def deduplicate_lines(lines: LineSet, settings) -> LineSet:
-    """Drop lines that repeat a longer one (settings: config.LineSettings): nearly parallel
-    (< dedup_angle_deg), nearly the same offset (the shorter one's midpoint within
-    dedup_offset of the longer line) and overlapping extents. Order (longest first) is kept."""
-    m = len(lines)
-    if m < 2:
-        return lines
-    order = np.argsort(-lines.lengths, kind="stable")
-    L = lines.subset(order)
-    d = L.endpoints[:, 1] - L.endpoints[:, 0]
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-    cos_limit = np.cos(np.deg2rad(settings.dedup_angle_deg))
-    mid = L.midpoints
-    t_i0 = np.einsum("ij,ij->i", L.endpoints[:, 0], d)
-    t_i1 = np.einsum("ij,ij->i", L.endpoints[:, 1], d)
-    lo_i_all, hi_i_all = np.minimum(t_i0, t_i1)[:, None], np.maximum(t_i0, t_i1)[:, None]
-    dup = np.zeros((m, m), dtype=bool)
-    block = 256  # rows i per block: a plan's thousands of raw lines make (m, m) float temporaries costly
-    for b in range(0, m, block):
-        i = slice(b, b + block)
-        parallel = np.abs(d[i] @ d.T) >= cos_limit
-        # offset[i, j]: distance of j's midpoint to line i
-        close = np.abs(mid @ L.normals[i].T + L.offsets[None, i]).T < settings.dedup_offset
-        # extents of j projected on i's direction overlap i's extent
-        pj0 = L.endpoints[:, 0] @ d[i].T  # [j, i]
-        pj1 = L.endpoints[:, 1] @ d[i].T
-        lo_j, hi_j = np.minimum(pj0, pj1).T, np.maximum(pj0, pj1).T  # [i, j]
-        overlap = (np.minimum(hi_i_all[i], hi_j) - np.maximum(lo_i_all[i], lo_j)) > 0
-        dup[i] = np.triu(parallel & close & overlap, 1 + b)  # i suppresses only later (shorter) j
-    keep = np.ones(m, dtype=bool)
-    for i in np.flatnonzero(dup.any(axis=1)):  # greedy from the longest: a kept line suppresses its shorter repeats
-        if keep[i]:
-            keep &= ~dup[i]
-    return L.subset(np.flatnonzero(keep))

@@ -20,7 +20,8 @@ import numpy as np
 
 from . import circle_fitting, line_growing
 from .config import CircleSettings, LineSettings
-from .geometry import CircleSet, LineSet, as_points, deduplicate_lines, grid_subsample
+from .geometry import CircleSet, LineSet, as_points, grid_subsample
+from .segment_pairs import deduplicate_lines
 
 __all__ = ["as_points", "deduplicate_lines", "extract_circles", "extract_lines", "grid_subsample"]
 

@@ -47,9 +47,10 @@ from .documents import real_number
 from .errors import FloorplanError
 from .floorplan import Floorplan
 from .raster_files import check_plan_budget, coarsening, coarsening_warning
-from .geometry import CircleSet, LineSet, deduplicate_lines
+from .geometry import CircleSet, LineSet
 from .plan_readers import ARC_CHORD, CIRCLE_FIT_TOLERANCE, MIN_CIRCLE_VERTICES, VECTOR_SUFFIXES, VectorGeometry, read_dxf, read_geojson, read_svg
 from .segment_merging import merge_collinear
+from .segment_pairs import deduplicate_lines
 
 def _ring_circle(ring: np.ndarray, max_radius: float) -> tuple[float, float, float] | None:
     """(cx, cy, r) when a closed ring's vertices lie on a circle no larger than a pillar."""
@@ -74,7 +75,16 @@ class _Primitives:
 
 
 def _segments(polylines) -> np.ndarray:
-    return np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in polylines]) if polylines else np.zeros((0, 2, 2))
+    """(N, 2, 2) consecutive point pairs of every polyline, in order: one concatenation,
+    not an array per polyline (100,000 LINEs)."""
+    if not polylines:
+        return np.zeros((0, 2, 2))
+    points = np.concatenate(polylines)
+    last = np.cumsum([len(p) for p in polylines]) - 1  # each polyline's last point
+    pair = np.ones(max(len(points) - 1, 0), dtype=bool)  # a pair starts at every point but a polyline's last
+    pair[last[:-1]] = False
+    starts = np.flatnonzero(pair)
+    return np.stack([points[starts], points[starts + 1]], axis=1)
 
 
 def _ring_width(ring: np.ndarray) -> float:
