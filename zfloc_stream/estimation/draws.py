@@ -87,7 +87,8 @@ def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.
 def _admissible_triplets(indptr, indices, parallel, lengths):
     """The ordered triplets of the CSR neighbour lists (rows (i, j, k), j != k both
     neighbours of i, j-major in list order) without those whose j and k are both parallel
-    to i. Counted first, so the table is one allocation. Also each row's sampling weight,
+    to i (parallel[a]: list entry a is parallel to its line). Counted first, so the table
+    is one allocation. Also each row's sampling weight,
     the shortest of its three lines' lengths (exact: a minimum)."""
     n = indptr.shape[0] - 1
     total = 0
@@ -104,10 +105,10 @@ def _admissible_triplets(indptr, indices, parallel, lengths):
             continue
         for a in range(lo, hi):
             j = indices[a]
-            j_parallel = parallel[i, j]
+            j_parallel = parallel[a]
             for b in range(lo, hi):
                 k = indices[b]
-                if j == k or (j_parallel and parallel[i, k]):
+                if j == k or (j_parallel and parallel[b]):
                     continue
                 out[t, 0] = i
                 out[t, 1] = j
@@ -124,8 +125,11 @@ def admissible_triplets(neighbours, alpha: np.ndarray, max_angle: float, lengths
     n = len(neighbours)
     if n == 0:
         return np.zeros((0, 3), dtype=np.int64), np.zeros(0)
-    parallel = np.abs(np.sin(alpha[:, None] - alpha[None, :])) < np.sin(max_angle)
     sizes = np.array([len(nb) for nb in neighbours], dtype=np.int64)
     indptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     indices = np.concatenate([np.asarray(nb, dtype=np.int64) for nb in neighbours]) if indptr[-1] else np.zeros(0, np.int64)
+    # is each listed neighbour parallel to its line: per list entry, not an (N, N) matrix
+    # (46,000 plan lines would need a 17 GB temporary); the same expression element by element
+    alpha = np.asarray(alpha, dtype=np.float64)
+    parallel = np.abs(np.sin(alpha[np.repeat(np.arange(n), sizes)] - alpha[indices])) < np.sin(max_angle)
     return _admissible_triplets(indptr, indices, parallel, np.ascontiguousarray(lengths, dtype=np.float64))
