@@ -283,6 +283,8 @@ def test_a_noisy_map_gets_a_bounded_triplet_table_and_still_localizes(plain):
     finally:
         tracemalloc.stop()
     assert 0 < len(matches.triplets.rows) <= 100_000
+    assert 0 < len(matches.pairs.rows) <= 100_000  # the 2L table from the same thinned lists
+    assert len(matches.pairs.rows) < counts.sum() // 4  # far fewer than all neighbour pairs
     assert isinstance(result, LocalizationResult)
     assert peak < 400 * 2**20, f"peak {peak / 2**20:.0f} MiB"
     # deterministic: the same plan gives the same thinned table
