@@ -547,10 +547,11 @@ def spliced(segments: list[list]) -> tuple[list, list[int]]:
     that its first pose equals the previous segment's last (a kidnap: no odometry motion
     across the cut). Returns the frames and the index of each cut."""
     frames, cuts = list(segments[0]), []
+    key = "T_odom_sensor" if hasattr(frames[0], "T_odom_sensor") else "T_odom_cam"  # laser or camera frames
     for segment in segments[1:]:
-        anchor = frames[-1].T_odom_sensor @ np.linalg.inv(segment[0].T_odom_sensor)
+        anchor = getattr(frames[-1], key) @ np.linalg.inv(getattr(segment[0], key))
         cuts.append(len(frames))
-        frames += [dataclasses.replace(f, T_odom_sensor=anchor @ f.T_odom_sensor) for f in segment]
+        frames += [dataclasses.replace(f, **{key: anchor @ getattr(f, key)}) for f in segment]
     return frames, cuts
 
 
