@@ -28,10 +28,10 @@ from zfloc_stream.config import load_settings
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors, run_rmse
 from zfloc_stream.sim import build_scene
-from zfloc_stream.sim.kidnap import corridor_kidnaps
+from zfloc_stream.sim.kidnap import corridor_kidnaps, played
 from zfloc_stream.sim.simulator import LaserSimSettings, SimSettings, simulate, simulate_laser
 
-from eval_real import spliced, walk_metrics
+from eval_real import walk_metrics
 
 
 def run_one(scene_name: str, seed: int, n_frames: int, overrides: list[str]) -> dict:
@@ -56,20 +56,16 @@ def kidnap_run(sensor: str, seed: int, overrides: list[str]) -> dict:
         sequence = simulate(scene, SimSettings(), seed=seed, trajectory=poses)
     else:
         sequence = simulate_laser(scene, LaserSimSettings(), seed=seed, trajectory=poses)
-    frames = list(sequence)
-    bounds = [0] + [i for cut in cuts for i in cut] + [len(frames)]
-    segments = [frames[a:b] for a, b in zip(bounds[::2], bounds[1::2])]
-    played, at = spliced(segments)
-    truth = np.concatenate([poses[a:b] for a, b in zip(bounds[::2], bounds[1::2])])
+    frames, truth, at = played(list(sequence), poses, cuts)
     with Localizer(scene.floorplan, settings) as localizer:
         t0 = time.perf_counter()
-        estimates = [localizer.push(frame) for frame in played]
+        estimates = [localizer.push(frame) for frame in frames]
         seconds = time.perf_counter() - t0
         found = localizer.kidnaps_found
     errors = position_errors([e.pose for e in estimates], truth)
     statuses = [e.status for e in estimates]
     tracking = np.array([s == "tracking" for s in statuses])
-    return {"sensor": sensor, "seed": seed, "frames": len(played), "seconds": seconds,
+    return {"sensor": sensor, "seed": seed, "frames": len(frames), "seconds": seconds,
             "kidnap_m": [float(np.linalg.norm(truth[c, :2] - truth[c - 1, :2])) for c in at],
             "tracking": int(tracking.sum()), "tracking_off": int((tracking & (errors >= 1.0)).sum()),
             "kidnaps_found": found, "statuses": statuses, "errors": errors,

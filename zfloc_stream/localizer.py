@@ -37,7 +37,7 @@ from .estimation.scoring import scoring_kernels
 from .floorplan import Floorplan
 from .frames import CameraFrame, LaserFrame
 from .frontend.bev import RollingBEV
-from .kidnap_test import KidnapTest, Verdict, better_place, outscored
+from .kidnap_test import KidnapTest, Verdict, best_at, better_place, outscored
 from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
 from .odometry_jump import JUMPED, OdometryJumpWatch
@@ -104,6 +104,9 @@ class Localizer:
         self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
         self.kidnaps_found = 0  # of them, adopted: another place was tracked
         self.audit_tests = 0  # kidnap tests an audit started (localizer.audit_frames: a better place for the recent frames)
+        # the tracked mode's scores in the audits that did not outscore it (_audit_explains), and its id
+        self._audit_usual: deque[float] = deque(maxlen=self.settings.localizer.monitor_reference_frames)
+        self._audit_mode: int | None = None
         self._adopted_at = -1  # frame whose kidnap round was adopted last
         self._preview: HypothesisTracker | None = None  # reported while the tracker has no pose (_show_preview)
         self.jumps = OdometryJumpWatch(self.settings)  # odometry steps the sensor cannot have made (odometry_jump.py)
@@ -350,12 +353,25 @@ class Localizer:
         if outcome.result is None or not outcome.result.hypotheses:
             return False
         found = outcome.result.hypotheses[0].alignment if found is None else found
+        lc = self.settings.localizer
         if not outscored(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, sensor_xy,
-                         self.settings.localizer.audit_margin, found):
+                         lc.audit_margin, lc.audit_min_violation, found):
             return False
         hits = [h for h in self._recent_hits if len(h)]
         share = None if not hits else self.monitor.share(found, np.concatenate(hits))
         return share is not None and self.monitor.explains(share, self.monitor.usual_share(old.id))
+
+    def _audit_explains(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2) -> bool:
+        """An audit's test adopts `found` only while its round still finds the old place
+        outscored (_outscored) and scores found at least monitor_relative_share of the old
+        mode's usual audit score (the median over its audits that did not outscore it; a
+        relative level, as the monitor's). In the held-out laser window aces 291 #100 the
+        recent frames saw what the map lacks: the old place fell from 0.78-0.84 to -0.06
+        and a place 4-8 m off, at 0.15, was adopted."""
+        if not self._outscored(outcome, old, sensor_xy, found) or old.id != self._audit_mode or not self._audit_usual:
+            return False
+        there = best_at(outcome.result.hypotheses, found, old, self.tracker, sensor_xy)
+        return there is not None and there.score >= self.settings.localizer.monitor_relative_share * float(np.median(self._audit_usual))
 
     def _audit_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """An audit's round landed: if it scores another place audit_margin above the
@@ -366,7 +382,13 @@ class Localizer:
             return None  # a test already runs, or nothing is tracked any more: nothing to audit
         if outcome.result is None:
             return outcome.skipped
+        if old.id != self._audit_mode:
+            self._audit_usual.clear()
+            self._audit_mode = old.id
         if not self._outscored(outcome, old, scheduled.plane_pose[:2]):
+            here = best_at(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, scheduled.plane_pose[:2])
+            if here is not None:
+                self._audit_usual.append(here.score)
             return None
         self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0),
                                         since=scheduled.job.since, audit=True)
@@ -459,11 +481,12 @@ class Localizer:
             return "kidnap test over: its last round is dropped"
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
-        # a test the monitor started needs a place explaining more of the recent hits; one an
-        # audit started, a place the test's own round still scores audit_margin above the old
+        # a place explaining more of the recent hits; one an audit started also needs its own
+        # round to still find the old place outscored, by a place that explains the test's
+        # frames about as well as the tracked mode explained its BEV (audit_explains)
         verdict = test.feed(scheduled, outcome, lambda found: old is None or (
-            self._outscored(outcome, old, scheduled.plane_pose[:2], found.alignment) if test.audit
-            else self._better_place(found.alignment, old, scheduled.plane_pose[:2])))
+            self._better_place(found.alignment, old, scheduled.plane_pose[:2])
+            and (not test.audit or self._audit_explains(outcome, old, scheduled.plane_pose[:2], found.alignment))))
         if verdict is Verdict.CARRIED_OFF:
             self.tracker, self._kidnap = test.tracker, None
             self.kidnaps_found += 1

@@ -43,12 +43,15 @@ class LocalizerSettings(Section):
     # 0.90-0.95 of each frame's hits, so neither the monitor nor the contradiction starts a
     # kidnap test. While a mode is tracked, each round tick also runs a global search on what
     # the last audit_frames frames saw alone (0: off); when it scores another place at least
-    # audit_margin above the tracked one (a score gap, as tracking.confirm_score_gap: the
-    # tracked place is no longer near the top), a kidnap test starts on those frames (no
-    # `tracking` while it runs), adopted when its bank tracks a place its round still scores
-    # audit_margin above the old one (kidnap_test.outscored)
+    # audit_margin above the tracked one and those frames saw open space through at least
+    # audit_min_violation of the tracked place's walls (its Cv), a kidnap test starts on
+    # those frames (no `tracking` while it runs), adopted when its bank tracks a place its
+    # round still finds so (kidnap_test.outscored). A score gap alone is no evidence: on the
+    # held-out laser windows a 10-frame round prefers another place by >= 0.1 in 4.6% of
+    # the audits of a correct track
     audit_frames: int = Field(10, ge=0, le=10_000)
-    audit_margin: float = Field(0.1, ge=0, le=10)
+    audit_margin: float = Field(0.05, ge=0, le=10)
+    audit_min_violation: float = Field(0.05, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,

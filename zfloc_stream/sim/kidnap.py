@@ -8,12 +8,37 @@ each (benchmarks/eval_scenes.py --kidnap, tests/test_localizer.py)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import InputError
 from ..rng import make_rng
 from .scenes import Scene
 from .trajectory import trajectory_through
+
+def spliced(segments: list[list]) -> tuple[list, list[int]]:
+    """Frames (camera or laser) of consecutive segments, each later segment's odometry
+    re-anchored so that its first pose equals the previous segment's last (a kidnap: no
+    odometry motion across the cut). Returns the frames and the index of each cut."""
+    frames, cuts = list(segments[0]), []
+    key = "T_odom_sensor" if hasattr(frames[0], "T_odom_sensor") else "T_odom_cam"
+    for segment in segments[1:]:
+        anchor = getattr(frames[-1], key) @ np.linalg.inv(getattr(segment[0], key))
+        cuts.append(len(frames))
+        frames += [replace(f, **{key: anchor @ getattr(f, key)}) for f in segment]
+    return frames, cuts
+
+
+def played(frames: list, poses: np.ndarray, cuts: list[tuple[int, int]]) -> tuple[list, np.ndarray, list[int]]:
+    """The frames of a walk played with the cuts of corridor_kidnaps (frames k..j-1 of each
+    (k, j) skipped, the odometry standing still across): (frames, their true poses, the
+    index of each cut in them)."""
+    bounds = [0] + [i for cut in cuts for i in cut] + [len(frames)]
+    pairs = list(zip(bounds[::2], bounds[1::2]))
+    out, at = spliced([frames[a:b] for a, b in pairs])
+    return out, np.concatenate([poses[a:b] for a, b in pairs]), at
+
 
 MIN_BEFORE = 25  # frames before the first cut (the first fix comes first)
 MIN_AFTER = 40  # frames after each landing before the next cut or the end (recovery is judged over 30)
