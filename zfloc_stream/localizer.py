@@ -408,7 +408,8 @@ class Localizer:
         """A round lands: the tracker updates as of the frame the round started at, then the
         local refinement follows the tracked mode. Returns why the round did not run (None
         when it did)."""
-        self.last_round = outcome
+        if not scheduled.job.audit:  # an audit is a side check, not the round the estimate reports on
+            self.last_round = outcome
         if scheduled.job.index < self._jumped_at:
             return "round started before an odometry jump: dropped"
         if scheduled.job.index < self._reset_at:
@@ -464,10 +465,13 @@ class Localizer:
         contradicted what older frames saw, test whether the sensor was carried off
         (kidnap_test.py); else it walked into what the map lacks, and the next round
         searches globally on the whole BEV."""
-        if self._kidnap is not None:
-            return
         contradiction = max(self._recent_contradiction, default=0.0)
+        if self._kidnap is not None and not self._kidnap.audit:
+            return
         if contradiction >= self.settings.localizer.kidnap_contradiction:
+            # the monitor's test replaces an audit's: its frames start after the discontinuity
+            # (the apartment carried off: the audit's test, on frames from 5 before the cut,
+            # adopted nothing; the monitor's, started 2 frames later, adopts 20 frames after the cut)
             self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, contradiction)
             self.kidnap_tests += 1
         else:
