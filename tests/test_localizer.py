@@ -64,13 +64,18 @@ def test_a_round_says_whether_it_searched_globally(monkeypatch):
     so skipped the global (correlative) search."""
     from zfloc_stream.estimation import ransac
 
+    import threading
+
     searches = []
     seeds = ransac.correlative_seeds
-    monkeypatch.setattr(ransac, "correlative_seeds", lambda *a, **k: searches.append(1) or seeds(*a, **k))
+    # rounds inline, searches counted on this thread: a round still in flight on another
+    # test's worker thread is not this localizer's
+    monkeypatch.setattr(ransac, "correlative_seeds", lambda *a, **k: (
+        threading.current_thread() is threading.main_thread() and searches.append(1)) or seeds(*a, **k))
     scene = build_scene("apartment", seed=0)
     seq = simulate(scene, SimSettings(), seed=0, n_frames=40)
     # the audit (localizer.audit_frames) adds a global search of its own beside the rounds
-    loc = Localizer(scene.floorplan, Settings(localizer={"audit_frames": 0}))
+    loc = Localizer(scene.floorplan, Settings(localizer={"audit_frames": 0, "pipeline": "inline"}))
     kinds = []
     for f in seq:
         if "primitives" in loc.push(f).timings and loc.last_round.result is not None:  # a round ran

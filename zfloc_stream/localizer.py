@@ -392,8 +392,7 @@ class Localizer:
             return None
         self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0),
                                         since=scheduled.job.since, audit=True)
-        self.kidnap_tests += 1
-        self.audit_tests += 1
+        self.audit_tests += 1  # not in kidnap_tests: those the monitor started
         return self._kidnap_round(scheduled, outcome, timings)
 
     def _kidnap_job(self, index: int, copy: bool) -> RoundJob:
