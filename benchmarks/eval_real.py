@@ -57,6 +57,7 @@ from zfloc_stream.config import load_settings
 from zfloc_stream.datasets.carmen import carmen_sequence, load_log
 from zfloc_stream.mapping import log_odds_map, map_from_log
 from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
+from zfloc_stream.sim.kidnap import spliced
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.estimate import STATUSES
 from zfloc_stream.frames import FLOOR, WALL
@@ -543,18 +544,6 @@ def kidnap_order(n: int, kidnap: bool) -> list[tuple[int, int]]:
         return [(0, n)]
     a, b = n // 3, 2 * n // 3
     return [(0, a), (b, n), (a, b)]
-
-
-def spliced(segments: list[list]) -> tuple[list, list[int]]:
-    """Laser frames of consecutive segments, each later segment's odometry re-anchored so
-    that its first pose equals the previous segment's last (a kidnap: no odometry motion
-    across the cut). Returns the frames and the index of each cut."""
-    frames, cuts = list(segments[0]), []
-    for segment in segments[1:]:
-        anchor = frames[-1].T_odom_sensor @ np.linalg.inv(segment[0].T_odom_sensor)
-        cuts.append(len(frames))
-        frames += [dataclasses.replace(f, T_odom_sensor=anchor @ f.T_odom_sensor) for f in segment]
-    return frames, cuts
 
 
 def walk_metrics(statuses: list[str], errors: np.ndarray, cuts: list[int]) -> dict:

@@ -6,7 +6,14 @@ run on the first L frames alone would report, so SR at length L is read off the 
 success = all of frames L-10 .. L-1 within 1 m (F3Loc protocol, zfloc_stream.metrics).
 
     python benchmarks/eval_scenes.py --scenes apartment --seeds 20
-    python benchmarks/eval_scenes.py --scenes rooms,apartment,office,symmetric,hall --seeds 20 --workers 2
+    python benchmarks/eval_scenes.py --scenes rooms,apartment,office,symmetric,hall,offices --seeds 20 --workers 2
+
+--kidnap (issue 43): the repetitive building ('offices') walked along its corridor and back,
+carried off twice whole offices (10-20 m) along the corridor to a place that looks like the
+one it left, the odometry standing still across each cut (sim/kidnap.py); per run the frames
+until the pose is `tracking` within 1 m again, and the `tracking` frames 1 m or more off.
+
+    python benchmarks/eval_scenes.py --kidnap --sensor camera,laser --seeds 10 --workers 2
 """
 
 from __future__ import annotations
@@ -21,7 +28,10 @@ from zfloc_stream.config import load_settings
 from zfloc_stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors, run_rmse
 from zfloc_stream.sim import build_scene
-from zfloc_stream.sim.simulator import SimSettings, simulate
+from zfloc_stream.sim.kidnap import corridor_kidnaps, played
+from zfloc_stream.sim.simulator import LaserSimSettings, SimSettings, simulate, simulate_laser
+
+from eval_real import walk_metrics
 
 
 def run_one(scene_name: str, seed: int, n_frames: int, overrides: list[str]) -> dict:
@@ -35,6 +45,49 @@ def run_one(scene_name: str, seed: int, n_frames: int, overrides: list[str]) -> 
     errors = position_errors([e.pose for e in estimates], sequence.poses)
     return {"scene": scene_name, "seed": seed, "errors": errors, "seconds": seconds,
             "statuses": [e.status for e in estimates]}
+
+
+def kidnap_run(sensor: str, seed: int, overrides: list[str]) -> dict:
+    """One kidnapped walk of the 'offices' scene (corridor_kidnaps), camera or laser."""
+    settings = load_settings(overrides=overrides).model_copy(update={"seed": seed})
+    scene = build_scene("offices", seed=seed)
+    poses, cuts = corridor_kidnaps(scene, seed)
+    if sensor == "camera":
+        sequence = simulate(scene, SimSettings(), seed=seed, trajectory=poses)
+    else:
+        sequence = simulate_laser(scene, LaserSimSettings(), seed=seed, trajectory=poses)
+    frames, truth, at = played(list(sequence), poses, cuts)
+    with Localizer(scene.floorplan, settings) as localizer:
+        t0 = time.perf_counter()
+        estimates = [localizer.push(frame) for frame in frames]
+        seconds = time.perf_counter() - t0
+        found = localizer.kidnaps_found
+    errors = position_errors([e.pose for e in estimates], truth)
+    statuses = [e.status for e in estimates]
+    tracking = np.array([s == "tracking" for s in statuses])
+    return {"sensor": sensor, "seed": seed, "frames": len(frames), "seconds": seconds,
+            "kidnap_m": [float(np.linalg.norm(truth[c, :2] - truth[c - 1, :2])) for c in at],
+            "tracking": int(tracking.sum()), "tracking_off": int((tracking & (errors >= 1.0)).sum()),
+            "kidnaps_found": found, "statuses": statuses, "errors": errors,
+            **walk_metrics(statuses, errors, at)}
+
+
+def kidnap_table(results: list[dict]) -> str:
+    lines = ["| sensor | seed | frames | first fix | kidnaps: metres -> frames to recover | `tracking` frames | 1 m+ off | kidnaps found | ms/frame |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        kid = ", ".join(f"{m:.1f} m -> {'never' if k is None else k}" for m, k in zip(r["kidnap_m"], r["recovery"]))
+        lines.append(f"| {r['sensor']} | {r['seed']} | {r['frames']} | {r['first_fix']} | {kid} | {r['tracking']} | "
+                     f"{r['tracking_off']} | {r['kidnaps_found']} | {1000 * r['seconds'] / r['frames']:.0f} |")
+    for sensor in dict.fromkeys(r["sensor"] for r in results):
+        runs = [r for r in results if r["sensor"] == sensor]
+        rec = [k for r in runs for k in r["recovery"]]
+        done = [k for k in rec if k is not None]
+        tracking, off = sum(r["tracking"] for r in runs), sum(r["tracking_off"] for r in runs)
+        lines.append(f"| {sensor}: all | {len(runs)} seeds | | | {len(done)}/{len(rec)} recovered, <= 30 frames: "
+                     f"{sum(k <= 30 for k in done)}, worst {max(done, default='-') if len(done) == len(rec) else 'never'} | "
+                     f"{tracking} | {off} ({100 * off / max(tracking, 1):.1f}%) | | |")
+    return "\n".join(lines)
 
 
 def table(results: list[dict], lengths: list[int]) -> str:
@@ -65,7 +118,18 @@ def main() -> None:
     ap.add_argument("--lengths", default="15,20,35,50,100")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--set", action="append", default=[], help="settings override key=value")
+    ap.add_argument("--kidnap", action="store_true", help="the kidnaps in the repetitive building (issue 43), not SR@1m")
+    ap.add_argument("--sensor", default="camera,laser", help="with --kidnap: camera, laser or both")
+    ap.add_argument("--first-seed", type=int, default=0)
     args = ap.parse_args()
+    if args.kidnap:
+        sensors = args.sensor.split(",")
+        if not set(sensors) <= {"camera", "laser"}:
+            ap.error(f"--sensor takes camera and/or laser, got {args.sensor}")
+        jobs = [(sensor, seed, args.set) for sensor in sensors for seed in range(args.first_seed, args.first_seed + args.seeds)]
+        with ProcessPoolExecutor(args.workers) as pool:
+            print(kidnap_table(list(pool.map(kidnap_run, *zip(*jobs)))))
+        return
     lengths = [int(v) for v in args.lengths.split(",")]
     jobs = [(s, seed, max(lengths), args.set) for s in args.scenes.split(",") for seed in range(args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:

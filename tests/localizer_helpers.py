@@ -25,9 +25,10 @@ class Kidnapped:
 def carried_off(frames, k0, later, count):
     """frames[:k0], then `count` frames from frames[later] on, their odometry re-anchored so
     that it stands still across the cut: the camera was carried from frame k0 - 1's place
-    to frame later's."""
-    anchor = frames[k0 - 1].T_odom_cam @ np.linalg.inv(frames[later].T_odom_cam)
-    return frames[:k0] + [replace(f, T_odom_cam=anchor @ f.T_odom_cam) for f in frames[later:later + count]]
+    to frame later's. Camera or laser frames."""
+    key = "T_odom_sensor" if hasattr(frames[0], "T_odom_sensor") else "T_odom_cam"
+    anchor = getattr(frames[k0 - 1], key) @ np.linalg.inv(getattr(frames[later], key))
+    return frames[:k0] + [replace(f, **{key: anchor @ getattr(f, key)}) for f in frames[later:later + count]]
 
 
 def settings_with(*overrides):

@@ -196,3 +196,27 @@ def test_more_seeds_stay_plausible(name):
         s = build_scene(name, seed)
         assert 0.75 * s.target_area <= s.floor_area <= 1.25 * s.target_area, seed
         assert ndimage.label(s.free)[1] == 1, seed
+
+
+def test_offices_repeat_exactly_along_the_corridor(scenes):
+    """'offices' (issue 43): the floorplan and the furniture repeat with the office width,
+    so a place and the place whole offices along look the same; the ends do not."""
+    for seed in (0, 1):
+        s = scenes[("offices", seed)]
+        period, n = s.info["period"], s.info["n_offices"]
+        x0, y0, x1, y1 = s.info["corridor"]
+        step = int(round(period / s.resolution))
+        assert abs(step * s.resolution - period) < 1e-9 and x1 - x0 == pytest.approx(n * period)
+        _, c0, _ = s.cells([[x0 + period, y0]])
+        block = s.occupied[:, c0[0]:c0[0] + (n - 3) * step]
+        moved = s.occupied[:, c0[0] + step:c0[0] + (n - 2) * step]
+        assert np.array_equal(block, moved)
+        for side in (s.furniture[:, 1] < y0, s.furniture[:, 1] > y1):
+            pieces = s.furniture[side & (s.furniture[:, 0] > x0) & (s.furniture[:, 0] < x1)]
+            office = np.floor((pieces[:, 0] - x0) / period).astype(int)
+            assert (office == 0).any()
+            for k in range(1, n):
+                assert np.allclose(pieces[office == k] - [k * period, 0, 0, 0, 0, 0], pieces[office == 0])
+        # the two ends differ from the offices and from each other
+        stairs, kitchen = s.room("stairs"), s.room("kitchen")
+        assert stairs.size != kitchen.size and min(kitchen.size) > period

@@ -57,6 +57,7 @@ class RoundJob:
     tracked: bool  # one mode confidently tracked and no global search asked for
     since: int = 0  # a kidnap test: the snapshot holds only what frames from this BEV stamp on saw (0: not a test)
     prior: BoundPrior | None = None  # the caller's pose prior, while it is active (prior.py): its global search uses it
+    audit: bool = False  # the audit's round (localizer.audit_frames): a global search on the frames since `since`
 
 
 @dataclass

@@ -41,6 +41,20 @@ class LocalizerSettings(Section):
     # camera; walking into a part the map lacks, under 0.01 (the built-in office with walls
     # erased), where a place 12.7 m away explains those frames better
     kidnap_contradiction: float = Field(0.15, ge=0, le=1)
+    # the audit (issue 43): carried to a place that looks like the old one (identical offices
+    # along a corridor), the frames do not contradict the BEV and the old place still explains
+    # 0.90-0.95 of each frame's hits, so neither the monitor nor the contradiction starts a
+    # kidnap test. While a mode is tracked, each round tick also runs a global search on what
+    # the last audit_frames frames saw alone (0: off); when it scores another place at least
+    # audit_margin above the tracked one and those frames saw open space through at least
+    # audit_min_violation of the tracked place's walls (its Cv), a kidnap test starts on
+    # those frames (no `tracking` while it runs), adopted when its bank tracks a place its
+    # round still finds so (kidnap_recovery.outscored). A score gap alone is no evidence: on the
+    # held-out laser windows a 10-frame round prefers another place by >= 0.1 in 4.6% of
+    # the audits of a correct track
+    audit_frames: int = Field(10, ge=0, le=10_000)
+    audit_margin: float = Field(0.05, ge=0, le=10)
+    audit_min_violation: float = Field(0.05, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,

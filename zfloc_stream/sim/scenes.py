@@ -577,6 +577,73 @@ def _gen_symmetric(seed: int) -> Scene:
                      doors=doors, walls=(segments, thickness))
 
 
+def _gen_offices(seed: int) -> Scene:
+    """A repetitive building: one long corridor with identical offices on both sides (the
+    same width, depth, door offset and furniture in every office of a side), a stair core
+    at the west end and a kitchen at the east end. A place in the corridor and the place
+    whole offices along it look the same until an end comes into view (a kidnap to a place
+    that looks like the old one: issue 43).
+
+    The office width `info['period']` is a whole number of raster cells, so the raster (the
+    floorplan) and the 3D scene repeat exactly. Waypoints: 'west_end', 'east_end' (corridor
+    ends), 'stairs', 'kitchen', one per office ('south{k}', 'north{k}'), and the door
+    points 'south{k}_door', 'north{k}_door' in the corridor in front of each door.
+    info: period, n_offices, corridor (x0, y0, x1, y1).
+    """
+    rng = make_rng(seed, "scene", "offices")
+    res = RESOLUTION
+    cells = lambda v: float(np.round(v / res) * res)  # noqa: E731, a whole number of cells
+    period = cells(rng.uniform(3.2, 3.8))
+    n = int(rng.integers(9, 12))
+    hw = cells(rng.uniform(0.9, 1.1))
+    depth_s, depth_n = cells(rng.uniform(4.0, 5.0)), cells(rng.uniform(4.0, 5.0))
+    x0, x1 = snap(0.0), snap(0.0) + n * period
+    ya, yb = snap(0.0), snap(0.0) + 2 * hw
+    corridor = Room("corridor", "corridor", x0, ya, x1, yb)
+    rooms = [corridor]
+    connections: list[Connection] = []
+    # one door offset per side, drawn once: every office of a side is the same office
+    margin = 0.45 + DOOR_WIDTH / 2
+    door_s = cells(rng.uniform(margin, period - margin))
+    door_n = cells(rng.uniform(margin, period - margin))
+    for k in range(n):
+        a, b = x0 + k * period, x0 + (k + 1) * period
+        rooms.append(Room(f"south{k}", "room", a, ya - depth_s, b, ya))
+        connections.append(Connection(0, len(rooms) - 1, "door", DOOR_WIDTH, a + door_s))
+        rooms.append(Room(f"north{k}", "room", a, yb, b, yb + depth_n))
+        connections.append(Connection(0, len(rooms) - 1, "door", DOOR_WIDTH, a + door_n))
+    # the ends differ from the offices and from each other (the building is not symmetric)
+    stairs = Room("stairs", "core", snap(x0 - rng.uniform(3.0, 4.0)), ya - cells(rng.uniform(1.0, 2.0)),
+                  x0, yb + cells(rng.uniform(2.5, 3.5)))
+    kitchen = Room("kitchen", "room", x1, ya - depth_s, snap(x1 + rng.uniform(5.0, 6.5)), yb)
+    rooms += [stairs, kitchen]
+    connections += [Connection(0, len(rooms) - 2, "door", 1.4, 0.5 * (ya + yb)),
+                    Connection(0, len(rooms) - 1, "door", 1.0, 0.5 * (ya + yb))]
+    segments, thickness, doors, _ = build_walls(rooms, connections, rng, EXTERIOR_WALL, INTERIOR_WALL)
+    # Furniture: the first office of each side, copied into every office of that side.
+    copies = []
+    for tag in ("south", "north"):
+        first = next(i for i, r in enumerate(rooms) if r.name == f"{tag}0")
+        base = _furnish([rooms[first]], [d for d in doors if first in d.rooms], np.zeros((0, 3)), rng)
+        for k in range(n):
+            shifted = base.copy()
+            shifted[:, 0] += k * period
+            copies.append(shifted)
+    ends = [i for i, r in enumerate(rooms) if r.name in ("stairs", "kitchen")]
+    copies.append(_furnish([rooms[i] for i in ends], [d for d in doors if set(d.rooms) & set(ends)],
+                           np.zeros((0, 3)), rng, wall_kinds=("room", "core")))
+    furniture = np.concatenate(copies)
+    mid = 0.5 * (ya + yb)
+    waypoints = {"west_end": (x0 + 0.8, mid), "east_end": (x1 - 0.8, mid)}
+    for k in range(n):
+        waypoints[f"south{k}_door"] = (x0 + k * period + door_s, mid)
+        waypoints[f"north{k}_door"] = (x0 + k * period + door_n, mid)
+    info = {"period": period, "n_offices": n, "corridor": (x0, ya, x1, yb)}
+    return _assemble("offices", seed, rooms, connections, rng, furniture=furniture,
+                     wall_height=2.7, target_area=float(n * period * (depth_s + depth_n + 2 * hw)),
+                     waypoints=waypoints, info=info, doors=doors, walls=(segments, thickness))
+
+
 def make_scene(name: str, rooms: list[Room], connections: list[Connection], seed: int = 0, pillars=(),
                furniture=None, wall_height: float = 2.7, waypoints: dict | None = None) -> Scene:
     """A scene from a hand-made room plan (tests, custom layouts). Room coordinates should
@@ -594,6 +661,7 @@ SCENES = {
     "office": _gen_office,
     "symmetric": _gen_symmetric,
     "hall": _gen_hall,
+    "offices": _gen_offices,
 }
 
 

@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
         "  zfloc-stream demo --floorplan plan.dxf --skip-layers FURNITURE,TEXT\n  zfloc-stream demo --floorplan plan.svg --scale 0.01",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    demo.add_argument("--scene", default="apartment", help="built-in scene: rooms, apartment, office, symmetric, hall (default apartment)")
+    demo.add_argument("--scene", default="apartment", help="built-in scene: rooms, apartment, office, symmetric, hall, offices (default apartment)")
     demo.add_argument("--floorplan", type=Path, help="walk through your own plan instead (ROS map YAML, DXF, SVG, GeoJSON)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the scene, the walk and the localizer (default 0)")
     demo.add_argument("--frames", type=int, default=100, help="number of frames (default 100)")
