@@ -162,3 +162,31 @@ def test_monitor_recovery_share_is_the_bar_after_an_inconsistent_frame(plan):
     for _ in range(6):  # another mode tracked: no doubt carried over
         m.wants_global_search(8, IDENTITY, mixed(plan, 40))
     assert m.frame_consistent(IDENTITY, mixed(plan, 24), mode_id=8) is True
+
+
+def test_audit_margin_and_audit_min_violation_are_the_audit_boundaries():
+    """kidnap_recovery.outscored (the audit): another place beyond the pose-jump gate must
+    score at least audit_margin above the tracked one, and the recent frames must see open
+    space through at least audit_min_violation of the tracked place's walls (its Cv)."""
+    from types import SimpleNamespace
+
+    from zfloc_stream.kidnap_recovery import outscored
+
+    old, far = IDENTITY, Sim2(1.0, 0.0, np.array([17.0, 0.0]))
+    tracker = SimpleNamespace(pose_jumped=lambda a, b, xy, mode: bool(np.hypot(*np.subtract(a.t, b.t)) > 1.0))
+    mode = SimpleNamespace(id=1)
+    lc = Settings().localizer
+    gap, violation = lc.audit_margin, lc.audit_min_violation
+
+    def audit(there_score, here_score, here_cv, margin=gap, min_violation=violation):
+        hyps = [SimpleNamespace(alignment=far, score=there_score, cv=0.0), SimpleNamespace(alignment=old, score=here_score, cv=here_cv)]
+        return outscored(hyps, old, mode, tracker, np.zeros(2), margin, min_violation)
+
+    assert audit(0.5 + gap, 0.5, violation)  # exactly the margin and the violation
+    assert not audit(np.nextafter(0.5 + gap, 0.0), 0.5, violation)  # just under the margin
+    assert not audit(0.9, 0.5, np.nextafter(violation, 0.0))  # a clear gap, but the old walls were not seen through
+    assert not audit(0.9, 0.5, violation, min_violation=np.nextafter(violation, 1.0))
+    near = [SimpleNamespace(alignment=Sim2(1.0, 0.0, np.array([0.5, 0.0])), score=0.9, cv=0.0)]
+    assert not outscored(near, old, mode, tracker, np.zeros(2), gap, violation)  # within the gate: the same place
+    elsewhere_only = [SimpleNamespace(alignment=far, score=0.3, cv=0.0)]
+    assert outscored(elsewhere_only, old, mode, tracker, np.zeros(2), gap, violation)  # the round kept nothing at the old place
