@@ -30,6 +30,12 @@ def test_verdict_only_for_a_run_that_never_tracked():
     assert text is not None and "does not match" in text and f"3 of {MIN_JUDGED_FRAMES} frames, 30%" in text
     match.note(0.9, "tracking")
     assert match.verdict() is None
+    fits = MapMatch(None, settings.localizer, settings.tracking)  # most frames fit, no place stood out
+    for k in range(MIN_JUDGED_FRAMES):
+        fits.note(0.2 if k % 2 else 0.9, "ambiguous")
+    text = fits.verdict()
+    assert "does not match" in text and f"5 of {MIN_JUDGED_FRAMES} frames, 50%" in text and "single out one place" in text
+    assert "no place in it explained" not in text
 
 
 def run(scene_of_map, frames):

@@ -61,7 +61,13 @@ class MapMatch:
         """The run's warning when the map did not match what the sensor saw, else None."""
         if self.tracking or self.judged < MIN_JUDGED_FRAMES:
             return None
-        return (f"the map does not match what the sensor sees: no place in it explained the frames well enough to track "
-                f"(at the best place found it explained {self.explained} of {self.judged} frames, "
-                f"{100.0 * self.explained / self.judged:.0f}%: tracking.min_explained_share = {self.min_share:g} of their "
-                f"wall points within {self.distance:g} m of a plan wall); is it the right building and floor?")
+        counted = (f"{self.explained} of {self.judged} frames, {100.0 * self.explained / self.judged:.0f}%: "
+                   f"tracking.min_explained_share = {self.min_share:g} of their wall points within {self.distance:g} m of a plan wall")
+        if 2 * self.explained < self.judged:
+            return (f"the map does not match what the sensor sees: no place in it explained the frames well enough to track "
+                    f"(at the best place found it explained {counted}); is it the right building and floor?")
+        # most frames fit, yet no place stood out: saying "no place explained them" would be
+        # false (a plan of 100,000 scattered lines fits anything; a look-alike building fits too)
+        return (f"the map does not match what the sensor sees well enough to single out one place: the best place found "
+                f"explained {counted}, but others explained the frames about as well (places that look alike, clutter "
+                f"that fits anywhere, or a look-alike building); is it the right building and floor?")
