@@ -264,12 +264,9 @@ def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_0
             units, segments = fast
             factor = _dxf_units(units, path, scale)
             # as ezdxf's LINE paths, (start, end), scaled as VectorGeometry.scaled scales them (one product, not 100,000)
-            with np.errstate(over="ignore"):
+            with np.errstate(over="ignore"):  # a coordinate scaled past float range: check_reach refuses it
                 geometry = VectorGeometry(polylines=list(segments * np.array([factor, factor])))
-            geometry.check_reach(path)
-            if scale is None:
-                geometry.check_span(path, _dxf_unit_name(units))
-            return geometry
+            return _dxf_checked(geometry, path, scale, units)
     import ezdxf
     from ezdxf import path as ezpath
 
@@ -281,7 +278,8 @@ def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_0
         raise FloorplanError(f"{path}: not a valid DXF file ({err})") from None
     except Exception as err:  # noqa: BLE001 - ezdxf's parser raises StopIteration, ValueError... on damaged files
         raise FloorplanError(f"{path}: not a readable DXF file ({type(err).__name__}: {err})") from None
-    factor = _dxf_units(doc.header.get("$INSUNITS", 0), path, scale)
+    units = doc.header.get("$INSUNITS", 0)
+    factor = _dxf_units(units, path, scale)
     _dxf_expansion(doc, path, max_entities)  # also bounds the nesting: each level is an entity
     wanted = None if not layers else {name.lower() for name in layers}
     skipped = {name.lower() for name in skip_layers or ()}
@@ -324,10 +322,15 @@ def read_dxf(path: Path, scale, layers, skip_layers, max_entities: int = 1_000_0
                 raise FloorplanError(f"{what} cannot be read ({type(err).__name__}: {err})".replace("\n", " ")) from None
 
     visit(doc.modelspace())
-    geometry = geometry.scaled(factor)
+    return _dxf_checked(geometry.scaled(factor), path, scale, units)
+
+
+def _dxf_checked(geometry: VectorGeometry, path: Path, scale, units) -> VectorGeometry:
+    """The drawing in metres, checked: within reach of 0, and (units from the header, not
+    --scale) spanning at least a metre in the declared unit."""
     geometry.check_reach(path)
     if scale is None:
-        geometry.check_span(path, _dxf_unit_name(doc.header.get("$INSUNITS", 0)))
+        geometry.check_span(path, _dxf_unit_name(units))
     return geometry
 
 
