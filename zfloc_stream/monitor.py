@@ -80,14 +80,14 @@ class ConsistencyMonitor:
         share = self.share(alignment, hits)
         if share is None:
             return None
-        return self.explains(share, self.usual_share(mode_id))
+        # after an inconsistent frame of the tracked mode, the higher bar (what is reported only)
+        bar = self.settings.monitor_recovery_share if self._doubting else None
+        return self.explains(share, self.usual_share(mode_id), bar)
 
-    def explains(self, share: float, usual: float | None, doubting: bool | None = None) -> bool:
-        """The monitor's test: a share at least monitor_min_consistency and at least
-        monitor_relative_share of the usual share (when one is known); while doubting (by
-        default: after a frame below that), monitor_recovery_share of it."""
-        doubting = self._doubting if doubting is None else doubting
-        bar = self.settings.monitor_recovery_share if doubting else self.settings.monitor_relative_share
+    def explains(self, share: float, usual: float | None, bar: float | None = None) -> bool:
+        """The monitor's test: a share at least monitor_min_consistency and at least `bar`
+        (default monitor_relative_share) of the usual share (when one is known)."""
+        bar = self.settings.monitor_relative_share if bar is None else bar
         relative = usual is None or share >= bar * usual
         return bool(share >= self.settings.monitor_min_consistency and relative)
 
@@ -105,10 +105,10 @@ class ConsistencyMonitor:
         usual = self.usual_share(tracked_mode_id)
         # the run and the usual share count frames at the normal bar (what starts a kidnap
         # test is unchanged); the doubt only withholds `tracking` (frame_consistent)
-        consistent = self.explains(share, usual, doubting=False)
-        self._doubting = not self.explains(share, usual, doubting=True) if self._doubting else not consistent
+        consistent = self.explains(share, usual)
+        self._doubting = not self.explains(share, usual, self.settings.monitor_recovery_share) if self._doubting else not consistent
         if consistent:
-            self._usual.append(self.share(alignment, hits))
+            self._usual.append(share)
         self.inconsistent_frames = 0 if consistent else self.inconsistent_frames + 1
         if self.inconsistent_frames >= self.settings.monitor_frames:
             self.inconsistent_frames = 0
