@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from backbone_helpers import random_images, save_depth_model, save_segmentation_model  # noqa: E402
 
 from zfloc_stream.backbones import Perception, import_torch  # noqa: E402
-from zfloc_stream.config import BackboneSettings  # noqa: E402
+from zfloc_stream.settings.loading import BackboneSettings  # noqa: E402
 from zfloc_stream.errors import BackboneError  # noqa: E402
 from zfloc_stream.frames import CameraFrame  # noqa: E402
 

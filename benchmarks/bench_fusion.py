@@ -23,10 +23,10 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from frontend_scene import camera_sequence  # noqa: E402
 
-from zfloc_stream.config import Settings  # noqa: E402
+from zfloc_stream.settings.loading import Settings  # noqa: E402
 from zfloc_stream.frames import CameraFrame, LaserFrame  # noqa: E402
 from zfloc_stream.frontend.bev import RollingBEV  # noqa: E402
-from zfloc_stream.rng import make_rng  # noqa: E402
+from zfloc_stream.runtime.rng import make_rng  # noqa: E402
 
 
 def shifted(frame: CameraFrame, dx: float) -> CameraFrame:

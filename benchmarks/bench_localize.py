@@ -26,9 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_batch_localization import make_trial, pose_errors  # noqa: E402  (scenario shared with the test)
 
-from zfloc_stream.config import Settings  # noqa: E402
+from zfloc_stream.settings.loading import Settings  # noqa: E402
 from zfloc_stream.estimation import localize  # noqa: E402
-from zfloc_stream.rng import make_rng  # noqa: E402
+from zfloc_stream.runtime.rng import make_rng  # noqa: E402
 from zfloc_stream.sim.scenes import build_scene  # noqa: E402
 
 GOALS_MS = {"apartment": 50.0, "office": 630.0}

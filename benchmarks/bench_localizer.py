@@ -13,8 +13,8 @@ import time
 import numpy as np
 import psutil
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 

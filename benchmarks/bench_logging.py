@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import Settings, load_settings
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import SessionWriter, read_session
+from zfloc_stream.settings.loading import Settings, load_settings
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.io.session import SessionWriter, read_session
 from zfloc_stream.sim import SimSettings, build_scene, simulate
 
 

@@ -48,12 +48,12 @@ import cv2
 import ezdxf
 import numpy as np
 
-from zfloc_stream.config import load_settings
+from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.estimation.correspondences import floorplan_matches
-from zfloc_stream.floorplan import Floorplan, write_ros_map
-from zfloc_stream.plan_loading import load_floorplan
-from zfloc_stream.rng import make_rng
-from zfloc_stream.vector_floorplan import load_vector_floorplan
+from zfloc_stream.plans.floorplan import Floorplan, write_ros_map
+from zfloc_stream.plans.loading import load_floorplan
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.plans.vector import load_vector_floorplan
 
 WIDTH, HEIGHT = 248.0, 240.0  # m
 BAND = 17.0  # m: rooms 6.5 m deep either side of a 4 m corridor
@@ -133,8 +133,8 @@ def large_plan(size: float, seed: int, out: Path, settings, log: str | None, vec
         img = canvas.astype(bool)
         path = None
     else:
-        from zfloc_stream.datasets.carmen import load_log
-        from zfloc_stream.mapping import map_from_log
+        from zfloc_stream.io.datasets.carmen import load_log
+        from zfloc_stream.plans.map_from_log import map_from_log
 
         data = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
         path = data / f"{log}-corrected.log.gz"
@@ -184,8 +184,8 @@ def large_main(args, settings, out: Path) -> int:
     print(f"peak RSS of the process: {peak:.0f} MiB ({before:.0f} MiB before the load: imports, kernels, the generated image)")
     if log_path is None:
         return 0
-    from zfloc_stream.datasets.carmen import carmen_sequence
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.io.datasets.carmen import carmen_sequence
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.metrics import position_errors
 
     run = load_settings(overrides=args.set, base_overrides={"estimator": {"scale_mode": "fixed"}})

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import Settings
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.primitives import extract_circles, extract_lines
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.primitives.extract import extract_circles, extract_lines
 from zfloc_stream.sim.raycast2d import cast_rays
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 
 ROOT = Path(__file__).resolve().parents[1]
 INTEL = ROOT.parent / "shared" / "data" / "sessions" / "intel-camera-30" / "map.yaml"

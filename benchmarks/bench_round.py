@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.datasets.carmen import carmen_sequence
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import read_session
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.io.datasets.carmen import carmen_sequence
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.io.session import read_session
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

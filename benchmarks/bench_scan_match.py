@@ -26,11 +26,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from eval_real import DATA, LOGS, drift_overrides  # noqa: E402
 
-from zfloc_stream.config import load_settings  # noqa: E402
-from zfloc_stream.datasets.carmen import carmen_sequence  # noqa: E402
+from zfloc_stream.settings.loading import load_settings  # noqa: E402
+from zfloc_stream.io.datasets.carmen import carmen_sequence  # noqa: E402
 from zfloc_stream.errors import ZflocError  # noqa: E402
 from zfloc_stream.frontend.bev import RollingBEV, plane_pose  # noqa: E402
-from zfloc_stream.sim2 import wrap_angle  # noqa: E402
+from zfloc_stream.geometry.sim2 import wrap_angle  # noqa: E402
 
 
 def relative_steps(poses: np.ndarray) -> np.ndarray:

@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from profile_round import build_case  # noqa: E402
 
 from zfloc_stream.estimation.scoring import BevView, floorplan_scorer, scoring_kernels, sparse_line_points  # noqa: E402
-from zfloc_stream.localizer import Localizer  # noqa: E402
+from zfloc_stream.stream.localizer import Localizer  # noqa: E402
 
 
 def best_ms(fn, repeats: int) -> tuple[float, np.ndarray]:

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # peak RSS sampled every frame (ru_maxrss would carry the writing parent's peak across exec)
 CHILD = """
 import sys, time, psutil
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 proc = psutil.Process()
 t = time.perf_counter()
 n = peak = 0

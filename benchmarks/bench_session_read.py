@@ -37,15 +37,15 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from zfloc_stream.config import Settings
-from zfloc_stream.datasets.mcap import session_sequence
-from zfloc_stream.session import read_session
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.datasets.mcap import session_sequence
+from zfloc_stream.io.session import read_session
 
 SLICE = 50
 
 
 def write_session(path: Path, n_frames: int, scene_name: str) -> None:
-    from zfloc_stream.session import record_session  # the engine and simulator: not in the measuring processes
+    from zfloc_stream.io.session import record_session  # the engine and simulator: not in the measuring processes
     from zfloc_stream.sim import build_scene, simulate
 
     scene = build_scene(scene_name, seed=0)

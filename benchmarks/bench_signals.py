@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 
 
 def start(out: Path, frames: int, scene: str, overrides=()) -> subprocess.Popen:

@@ -53,20 +53,20 @@ import numpy as np
 
 from functools import lru_cache
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.datasets.carmen import carmen_sequence, load_log
-from zfloc_stream.mapping import log_odds_map, map_from_log
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.io.datasets.carmen import carmen_sequence, load_log
+from zfloc_stream.plans.map_from_log import log_odds_map, map_from_log
 from zfloc_stream.sim import SimSettings, build_scene_from_floorplan, simulate
 from zfloc_stream.sim.kidnap import spliced
 from zfloc_stream.estimation.correlative import correlative_search
 from zfloc_stream.estimate import STATUSES
 from zfloc_stream.frames import FLOOR, WALL
-from zfloc_stream.rng import make_rng
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.prior import Prior
 from zfloc_stream.metrics import is_success, position_errors
-from zfloc_stream.vector_floorplan import load_vector_floorplan
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.plans.vector import load_vector_floorplan
+from zfloc_stream.geometry.sim2 import Sim2
 
 # ../shared/data beside the repository, else /work/shared/data (a clone elsewhere, as CI's)
 _BESIDE = Path(__file__).resolve().parents[2] / "shared" / "data"

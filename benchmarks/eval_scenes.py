@@ -24,8 +24,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.metrics import is_success, position_errors, run_rmse
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.kidnap import corridor_kidnaps, played

@@ -32,11 +32,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from fuzz_inputs import fuzz_floorplan, hostile_setting  # noqa: E402
 
-from zfloc_stream.config import Settings, load_settings  # noqa: E402
+from zfloc_stream.settings.loading import Settings, load_settings  # noqa: E402
 from zfloc_stream.errors import ZflocError  # noqa: E402
-from zfloc_stream.floorplan import Floorplan  # noqa: E402
-from zfloc_stream.plan_loading import load_floorplan  # noqa: E402
-from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan  # noqa: E402
+from zfloc_stream.plans.floorplan import Floorplan  # noqa: E402
+from zfloc_stream.plans.loading import load_floorplan  # noqa: E402
+from zfloc_stream.plans.vector import VECTOR_SUFFIXES, load_vector_floorplan  # noqa: E402
 
 
 class Hang(Exception):
@@ -119,7 +119,7 @@ def fuzz_settings(n: int, seed: int, timeout: float) -> tuple[Counter, list, lis
 
 def run_accepted(settings: list[Settings], timeout: float) -> tuple[Counter, list]:
     """Each distinct accepted setting runs a short laser walk through the session recorder."""
-    from zfloc_stream.session import record_session
+    from zfloc_stream.io.session import record_session
     from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
 
     scene = build_scene("rooms", 0)

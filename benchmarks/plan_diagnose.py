@@ -30,9 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import eval_real  # noqa: E402  (benchmarks/ is not a package)
 
 from zfloc_stream.estimation.results import alignment_of, model_rows  # noqa: E402
-from zfloc_stream.field_fit import refine_batch  # noqa: E402
+from zfloc_stream.estimation.field_fit import refine_batch  # noqa: E402
 from zfloc_stream.estimation.scoring import floorplan_scorer, score_hypotheses  # noqa: E402
-from zfloc_stream.sim2 import Sim2  # noqa: E402
+from zfloc_stream.geometry.sim2 import Sim2  # noqa: E402
 
 
 def true_alignment(plane_poses, truth) -> Sim2:

@@ -25,11 +25,11 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from zfloc_stream.config import LineSettings
-from zfloc_stream.floorplan import Floorplan, blob_spans
-from zfloc_stream.geometry import LineSet
-from zfloc_stream.primitives import deduplicate_lines
-from zfloc_stream.vector_floorplan import merge_collinear
+from zfloc_stream.settings.loading import LineSettings
+from zfloc_stream.plans.floorplan import Floorplan, blob_spans
+from zfloc_stream.geometry.shapes import LineSet
+from zfloc_stream.primitives.extract import deduplicate_lines
+from zfloc_stream.plans.vector import merge_collinear
 
 
 def _samples(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

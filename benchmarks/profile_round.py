@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.stream.localizer import Localizer
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking", "local_refinement")

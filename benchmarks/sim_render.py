@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.sim import SCENES, SimSettings, build_scene, camera_pose, intrinsics, random_walk, render, simulate
 
 

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.datasets.carmen import load_log
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.mapping import map_from_log
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.io.datasets.carmen import load_log
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.plans.map_from_log import map_from_log
 
 SESSIONS = Path(__file__).resolve().parents[2] / "shared" / "data" / "sessions"
 
@@ -32,8 +32,8 @@ def _run(floorplan, frames, settings) -> dict:
 
 
 def session_row(session: str, map_of: str, seed: int, overrides: list[str]) -> dict:
-    from zfloc_stream.datasets.mcap import session_sequence
-    from zfloc_stream.plan_loading import load_floorplan
+    from zfloc_stream.io.datasets.mcap import session_sequence
+    from zfloc_stream.plans.loading import load_floorplan
 
     settings = load_settings(overrides=list(overrides)).model_copy(update={"seed": seed})
     seq = session_sequence(SESSIONS / session / "session.mcap", settings)

@@ -14,8 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-from zfloc_stream.config import Settings
-from zfloc_stream.session import record_session
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.session import record_session
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 HERE = Path(__file__).resolve().parent

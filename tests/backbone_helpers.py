@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from zfloc_stream.frames import CameraFrame
-from zfloc_stream.session import SessionWriter
+from zfloc_stream.io.session import SessionWriter
 
 # a shuffled subset of ADE20K names, in the hub's spelling
 ADE_LIKE = ["wall", "floor", "ceiling", "bed ", "windowpane;window", "cabinet", "person", "door;double;door", "table", "rug;carpet;carpeting", "chair", "column, pillar"]

@@ -5,9 +5,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation import correspondences
-from zfloc_stream.geometry import CircleSet, LineSet
+from zfloc_stream.geometry.shapes import CircleSet, LineSet
 
 
 def draw_scene(seed, n_bev=24, clutter=150):

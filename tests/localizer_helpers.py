@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from zfloc_stream.config import load_settings
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.stream.localizer import Localizer
 
 
 class Kidnapped:

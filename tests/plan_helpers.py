@@ -4,10 +4,10 @@ the scoring, RANSAC, refinement and torch-scoring tests' shared world."""
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from zfloc_stream.config import Settings
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.observation import BevObservation
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.geometry.sim2 import Sim2
 
 RES = 0.05
 

@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 from mcap_ros2.writer import Writer
 
-from zfloc_stream.pose_interpolation import interpolate_pose
-from zfloc_stream.messages import quaternion_from_matrix
+from zfloc_stream.geometry.pose_interpolation import interpolate_pose
+from zfloc_stream.io.messages import quaternion_from_matrix
 
-# the pieces the package's own ROS 2 output uses (zfloc_stream/ros2_output.py)
-from zfloc_stream.ros2_output import HEADER, POINT, POSE, QUATERNION, TIME, VECTOR3
-from zfloc_stream.ros2_output import MSGDEFS as OUTPUT_MSGDEFS
-from zfloc_stream.ros2_output import msgdef as _msgdef
+# the pieces the package's own ROS 2 output uses (zfloc_stream/io/ros2_output.py)
+from zfloc_stream.io.ros2_output import HEADER, POINT, POSE, QUATERNION, TIME, VECTOR3
+from zfloc_stream.io.ros2_output import MSGDEFS as OUTPUT_MSGDEFS
+from zfloc_stream.io.ros2_output import msgdef as _msgdef
 
 MSGDEFS = {
     "sensor_msgs/msg/LaserScan": _msgdef(

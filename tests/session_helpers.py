@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimate import Alternative, Estimate
 from zfloc_stream.frames import CameraFrame, LaserFrame
-from zfloc_stream.session import SessionWriter
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.io.session import SessionWriter
+from zfloc_stream.geometry.sim2 import Sim2
 
 
 def rotation(rng: np.random.Generator) -> np.ndarray:
@@ -87,9 +87,9 @@ def write_fake_session(path, frames, settings: Settings | None = None, floorplan
 def record_laser_session(path, n_frames: int = 30, settings: Settings | None = None, scene: str = "rooms", seed: int = 0):
     """Run the real localizer on a simulated 2D laser walk and log it (as the CLI does).
     Returns the estimates."""
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.sim.raycast2d import RangeSensor2D
-    from zfloc_stream.rng import make_rng
+    from zfloc_stream.runtime.rng import make_rng
     from zfloc_stream.sim import build_scene
     from zfloc_stream.sim.trajectory import random_walk
 

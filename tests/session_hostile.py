@@ -15,7 +15,7 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from zfloc_stream.session import schemas as S
+from zfloc_stream.io.session import schemas as S
 
 CLASSES = {S.TOPIC_ODOMETRY: PoseInFrame, S.TOPIC_GROUND_TRUTH: PoseInFrame, S.TOPIC_CALIBRATION: CameraCalibration,
            S.TOPIC_DEPTH: RawImage, S.TOPIC_LABELS: RawImage, S.TOPIC_SCAN: LaserScan}

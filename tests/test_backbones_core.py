@@ -14,12 +14,12 @@ from mcap_protobuf.schema import build_file_descriptor_set
 
 from zfloc_stream.backbones import INSTALL_HINT, Perception, class_codes, import_torch
 from zfloc_stream.backbones.hf import Preprocess, resolve_source
-from zfloc_stream.config import BackboneSettings, Settings
+from zfloc_stream.settings.loading import BackboneSettings, Settings
 from zfloc_stream.errors import BackboneError, FrameError
 from zfloc_stream.frames import CEILING, FLOOR, OTHER, UNKNOWN, WALL, CameraFrame
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import SessionWriter, read_session
-from zfloc_stream.session import schemas as S
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.io.session import SessionWriter, read_session
+from zfloc_stream.io.session import schemas as S
 from zfloc_stream.tools.cli import main
 
 ADE = {0: "wall", 1: "building, edifice", 3: "floor, flooring", 5: "ceiling", 8: "windowpane;window", 14: "door;double;door",
@@ -110,7 +110,7 @@ def test_package_imports_without_torch():
             "    def find_spec(self, name, path=None, target=None):\n"
             "        if name.split('.')[0] in ('torch', 'transformers'): raise ImportError(name)\n"
             "sys.meta_path.insert(0, F())\n"
-            "import zfloc_stream, zfloc_stream.backbones, zfloc_stream.localizer, zfloc_stream.tools.cli, zfloc_stream.session\n"
+            "import zfloc_stream, zfloc_stream.backbones, zfloc_stream.stream.localizer, zfloc_stream.tools.cli, zfloc_stream.io.session\n"
             "print('ok')")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
@@ -311,7 +311,7 @@ def test_rgb_session_localizes_through_run_with_perfect_networks(tmp_path):
     """The RGB path itself (MCAP colour images -> batched networks -> depth/labels on the
     camera's pixel grid -> metric-prior localization) loses nothing: with networks that
     return the simulator's depth and labels, an RGB session localizes like a depth one."""
-    from zfloc_stream.datasets import detect_source
+    from zfloc_stream.io.datasets import detect_source
     from zfloc_stream.tools.session_runner import run_session
 
     frames, plan, sim_frames = rgb_frames("apartment", n=40, shape=(120, 160))

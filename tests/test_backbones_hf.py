@@ -18,10 +18,10 @@ from backbone_helpers import (  # noqa: E402
 )
 
 from zfloc_stream.backbones.hf import HfDepthBackbone, HfSegmentationBackbone  # noqa: E402
-from zfloc_stream.config import BackboneSettings, Settings  # noqa: E402
+from zfloc_stream.settings.loading import BackboneSettings, Settings  # noqa: E402
 from zfloc_stream.errors import BackboneError  # noqa: E402
 from zfloc_stream.frames import CEILING, FLOOR, OTHER, WALL  # noqa: E402
-from zfloc_stream.session import read_session  # noqa: E402
+from zfloc_stream.io.session import read_session  # noqa: E402
 from zfloc_stream.tools.cli import main  # noqa: E402
 from zfloc_stream.tools.replay_cli import main as replay_main  # noqa: E402
 

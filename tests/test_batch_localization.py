@@ -20,15 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation import localize
 from zfloc_stream.frames import LaserFrame
 from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.observation import BevObservation
 from zfloc_stream.sim.raycast2d import RangeSensor2D
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.sim.scenes import build_scene
-from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 SCENES = ("rooms", "apartment", "office")
 PATH_LENGTH = 5.0  # m

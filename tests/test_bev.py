@@ -1,12 +1,12 @@
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import ConfigError, FrameError, InputError
 from zfloc_stream.frames import LaserFrame
 from zfloc_stream.frontend.bev import RollingBEV
-from zfloc_stream.rng import make_rng
-from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 ROOM = (0.0, 0.0, 10.0, 6.0)  # x0, y0, x1, y1: an empty rectangular room
 

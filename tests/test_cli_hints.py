@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.session import SessionWriter, record_session
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.session import SessionWriter, record_session
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools import cli, replay_cli, study_cli
 

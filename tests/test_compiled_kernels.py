@@ -4,7 +4,7 @@ estimator.kernels setting still loads, ignored, with a FutureWarning."""
 
 import numba
 
-from zfloc_stream import numba_support
+from zfloc_stream.runtime import numba_support
 
 
 def test_the_first_compile_says_so_once_on_stderr(capsys, monkeypatch):
@@ -18,7 +18,7 @@ def test_the_first_compile_says_so_once_on_stderr(capsys, monkeypatch):
 def test_the_former_kernels_setting_still_loads_and_is_ignored():
     import pytest
 
-    from zfloc_stream.config import Settings, load_settings
+    from zfloc_stream.settings.loading import Settings, load_settings
 
     for kernels in ("numpy", "numba"):
         with pytest.warns(FutureWarning, match="estimator.kernels is ignored"):
@@ -37,7 +37,7 @@ def test_the_former_kernels_setting_still_loads_and_is_ignored():
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from zfloc_stream.config import WallMaskSettings  # noqa: E402
+from zfloc_stream.settings.loading import WallMaskSettings  # noqa: E402
 
 EMPTY2 = np.zeros((0, 2))
 
@@ -149,7 +149,7 @@ def test_circle_kernels_on_degenerate_clusters():
     """_groups, _members, _work_sizes, _fit_circle (through _circle_in_cluster),
     angular_coverage_and_span, _best_two_line_sse, _clusters: nothing, one point, no
     draws, one cluster of coincident points."""
-    from zfloc_stream import circle_fitting as cf
+    from zfloc_stream.primitives import circle_fitting as cf
 
     keep, group = cf._groups(EMPTY2, np.zeros((0, 2), np.int64), 1.0, 1)
     assert len(keep) == len(group) == 0
@@ -175,10 +175,10 @@ def test_circle_kernels_on_degenerate_clusters():
 def test_primitive_extraction_kernels_on_degenerate_clouds(points):
     """line_growing (_extract, _grow, free_points_in_ball / _band, _pca_line) and the
     circle path (extract_circles) on clouds with nothing to find."""
-    from zfloc_stream.circle_fitting import extract_circles
-    from zfloc_stream.config import Settings
-    from zfloc_stream.line_growing import extract_lines
-    from zfloc_stream.rng import make_rng
+    from zfloc_stream.primitives.circle_fitting import extract_circles
+    from zfloc_stream.settings.loading import Settings
+    from zfloc_stream.primitives.line_growing import extract_lines
+    from zfloc_stream.runtime.rng import make_rng
 
     pts = {"none": EMPTY2, "one": np.zeros((1, 2)), "two": np.array([[0.0, 0.0], [0.05, 0.0]]),
            "coincident": np.zeros((200, 2)), "collinear": np.column_stack([np.linspace(0, 1, 50), np.zeros(50)])}[points]
@@ -274,8 +274,8 @@ def test_correlative_kernels_on_degenerate_scores():
 def test_field_fit_kernels_on_degenerate_fields():
     """_evaluate, _solve, _refine_models (via refine_batch): no model, NaN models,
     points far outside a 2x2 field, a singular system."""
-    from zfloc_stream.config import RefineSettings
-    from zfloc_stream.field_fit import _refine_models, _solve, refine_batch
+    from zfloc_stream.settings.loading import RefineSettings
+    from zfloc_stream.estimation.field_fit import _refine_models, _solve, refine_batch
     from zfloc_stream.frontend.scan_match import GridField
 
     field = GridField(np.zeros((2, 2)), np.zeros(2), 0.05)

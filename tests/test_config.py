@@ -3,7 +3,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

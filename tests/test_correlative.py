@@ -6,7 +6,7 @@ import pytest
 
 from zfloc_stream.estimation import correlative as C
 from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
-from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 LASER = LaserSimSettings(fov_deg=180.0, n_beams=180, max_range=10.0)
 
@@ -80,7 +80,7 @@ def test_a_templates_180_degree_turn_has_the_mirrored_spectrum(H, W):
 
 def _segments(angles_deg, length=3.0, spacing=2.0):
     """Parallel segments, one per angle, side by side (a LineSet)."""
-    from zfloc_stream.geometry import LineSet
+    from zfloc_stream.geometry.shapes import LineSet
     ends = []
     for k, a in enumerate(np.deg2rad(angles_deg)):
         d = np.array([np.cos(a), np.sin(a)])
@@ -159,7 +159,7 @@ def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
     monkeypatch.undo()
     assert C.correlative_models(scene.floorplan, points[:2], **kw).shape == (0, 4)
     # a small room and many peaks: fewer rows of placements than peaks, the exact pass
-    from zfloc_stream.floorplan import Floorplan
+    from zfloc_stream.plans.floorplan import Floorplan
 
     occupied = np.zeros((16, 16), dtype=bool)
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True

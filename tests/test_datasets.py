@@ -10,13 +10,13 @@ import pytest
 
 from shared_data import SHARED_DATA
 
-from zfloc_stream.config import Settings, load_settings
-from zfloc_stream.datasets import detect_source, open_dataset
-from zfloc_stream.datasets.base import upright_camera_matrix
-from zfloc_stream.datasets.carmen import read_carmen
+from zfloc_stream.settings.loading import Settings, load_settings
+from zfloc_stream.io.datasets import detect_source, open_dataset
+from zfloc_stream.io.datasets.base import upright_camera_matrix
+from zfloc_stream.io.datasets.carmen import read_carmen
 from zfloc_stream.errors import InputError
 from zfloc_stream.frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
-from zfloc_stream.sim2 import wrap_angle
+from zfloc_stream.geometry.sim2 import wrap_angle
 
 HERE = Path(__file__).resolve().parent
 GIBSON = HERE / "fixtures" / "gibson"
@@ -238,8 +238,8 @@ def test_mcap_session_is_detected_with_its_floorplan_and_truth():
 
 # --- map-from-log --------------------------------------------------------------------------
 def test_map_from_log_leaves_the_excluded_window_out(tmp_path):
-    from zfloc_stream.floorplan import Floorplan
-    from zfloc_stream.mapping import map_from_log
+    from zfloc_stream.plans.floorplan import Floorplan
+    from zfloc_stream.plans.map_from_log import map_from_log
     from zfloc_stream.tools.cli import main
 
     log = read_carmen(_two_wall_log(tmp_path / "log.clf"))
@@ -271,7 +271,7 @@ def test_map_from_log_cli_bad_input_exits_2(tmp_path, capsys):
 
 
 def test_gibson_fixture_localizes_end_to_end():
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.metrics import evaluate_run, position_errors
 
     seq = detect_source(GIBSON / "Tinyroom", seed=0)

@@ -14,8 +14,8 @@ from zfloc_stream.estimation.draws import admissible_triplets, draw
 
 from types import SimpleNamespace
 
-from zfloc_stream.config import Settings
-from zfloc_stream.geometry import CircleSet, LineSet
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.geometry.shapes import CircleSet, LineSet
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -88,7 +88,7 @@ def test_fused_without_candidates():
 def _random_lines(gen, n, angle_choices):
     """n segments, directions drawn from angle_choices (repeats: exactly parallel lines)
     plus some just inside / outside the parallel threshold, scattered over 20 m."""
-    from zfloc_stream.geometry import LineSet
+    from zfloc_stream.geometry.shapes import LineSet
 
     angles = gen.choice(angle_choices, n) + gen.choice([0.0, 0.0, 1e-9, -1e-9, 0.3, 5.0], n) * np.pi / 180
     centres = gen.uniform(-10, 10, (n, 2))

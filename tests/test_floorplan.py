@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 import yaml
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.errors import FloorplanError, InputError, ZflocError
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plans.floorplan import Floorplan
 
 
 def room_grid(h=60, w=80, thickness=2):

@@ -14,8 +14,8 @@ import pytest
 from fuzz_inputs import BOX, fuzz_floorplan, issue_floorplans, write_dxf
 
 from zfloc_stream.errors import ZflocError
-from zfloc_stream.plan_loading import load_floorplan
-from zfloc_stream.vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan, merge_collinear
+from zfloc_stream.plans.loading import load_floorplan
+from zfloc_stream.plans.vector import VECTOR_SUFFIXES, load_vector_floorplan, merge_collinear
 
 N_FUZZ = 150
 

@@ -2,12 +2,12 @@ import numpy as np
 import pytest
 from frontend_scene import camera_sequence
 
-from zfloc_stream.config import GravitySettings, load_settings
+from zfloc_stream.settings.loading import GravitySettings, load_settings
 from zfloc_stream.errors import InputError
 from zfloc_stream.frames import WALL, CameraFrame
 from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.frontend.gravity import GravityEstimator, fit_plane, plane_pose, rotation_from_up
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 
 
 def angle_deg(a, b):

@@ -6,10 +6,11 @@ import os
 
 import pytest
 
-from zfloc_stream import heap, localizer as localizer_module
-from zfloc_stream import round_scheduler
-from zfloc_stream.config import load_settings
-from zfloc_stream.heap import _malloc_trim, release_free_heap
+from zfloc_stream.runtime import heap
+from zfloc_stream.stream import localizer as localizer_module
+from zfloc_stream.stream import scheduler as round_scheduler
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.runtime.heap import _malloc_trim, release_free_heap
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 
 DEMO = [sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", "rooms", "--frames", "3000", "--no-progress"]  # never done before the signal
 
@@ -70,9 +70,9 @@ def _rss_growth(n_frames: int, warm_up: int) -> float:
     laser stream (a walk back and forth through the office, pushed frame by frame)."""
     from dataclasses import replace
 
-    from zfloc_stream import heap
-    from zfloc_stream.config import Settings
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.runtime import heap
+    from zfloc_stream.settings.loading import Settings
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
 
     scene = build_scene("office", seed=1)
@@ -110,11 +110,11 @@ def test_no_yaml_tag_executes_code(tmp_path, tag):
     session's settings is refused with one error, and its code never runs."""
     import yaml
 
-    from zfloc_stream.config import load_settings
-    from zfloc_stream.documents import load_yaml
+    from zfloc_stream.settings.loading import load_settings
+    from zfloc_stream.settings.documents import load_yaml
     from zfloc_stream.errors import ConfigError, FloorplanError, ZflocError
-    from zfloc_stream.floorplan import Floorplan
-    from zfloc_stream.session.reader import _YAML_LOADER
+    from zfloc_stream.plans.floorplan import Floorplan
+    from zfloc_stream.io.session.reader import _YAML_LOADER
 
     marker = tmp_path / "ran"
     value = tag.format(marker=marker)

@@ -31,13 +31,17 @@ def test_the_package_keeps_its_layers():
 @pytest.mark.parametrize(
     "module, line, broken",
     [
-        # the core importing the pipeline above it
-        ("geometry.py", "from .localizer import Localizer", "zfloc_stream.geometry -> zfloc_stream.localizer"),
-        # engine stages are independent siblings: the tracker must not reach into the BEV
-        ("tracking.py", "from .frontend.bev import RollingBEV", "zfloc_stream.tracking -> zfloc_stream.frontend.bev"),
-        # the raster floorplan under the vector one (the cycle plan_loading.py broke)
-        ("floorplan.py", "from .vector_floorplan import load_vector_floorplan", "zfloc_stream.floorplan -> zfloc_stream.vector_floorplan"),
-        # the estimation stage taking device helpers from the camera backbones (torch_support.py has them)
+        # geometry (below everything but runtime and settings) importing the online loop
+        ("geometry/shapes.py", "from ..stream.localizer import Localizer", "zfloc_stream.geometry.shapes -> zfloc_stream.stream.localizer"),
+        # the tracker and the front end are independent siblings
+        ("tracking/filter_bank.py", "from ..frontend.bev import RollingBEV", "zfloc_stream.tracking.filter_bank -> zfloc_stream.frontend.bev"),
+        # the estimation stage below the tracker that ranks its hypotheses
+        ("estimation/ransac.py", "from ..tracking.filter_bank import HypothesisTracker", "zfloc_stream.estimation.ransac -> zfloc_stream.tracking.filter_bank"),
+        # the online loop writing its own log (io/ sits above it)
+        ("stream/localizer.py", "from ..io.session.writer import SessionWriter", "zfloc_stream.stream.localizer -> zfloc_stream.io.session.writer"),
+        # inside plans/: the raster floorplan under the vector one
+        ("plans/floorplan.py", "from .vector import load_vector_floorplan", "zfloc_stream.plans.floorplan -> zfloc_stream.plans.vector"),
+        # the estimation stage taking device helpers from the camera backbones (runtime/torch_support.py has them)
         ("estimation/scoring_torch.py", "from ..backbones.base import choose_device", "zfloc_stream.estimation.scoring_torch -> zfloc_stream.backbones.base"),
     ],
 )

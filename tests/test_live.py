@@ -14,9 +14,9 @@ import threading
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.session import SessionWriter
-from zfloc_stream.session import schemas as S
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.session import SessionWriter
+from zfloc_stream.io.session import schemas as S
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools import pacing
 from zfloc_stream.tools.cli import main

@@ -6,10 +6,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation.local_refinement import LocalRefinement
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.geometry.sim2 import Sim2
 
 RES = 0.05
 TRUE = Sim2(1.0, 0.0, np.zeros(2))

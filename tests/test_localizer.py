@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 from localizer_helpers import Kidnapped, carried_off, odometry_jumped
 
-from zfloc_stream.config import Settings, load_settings
-from zfloc_stream.session.schemas import encode_status, estimate_from_status, status_to_json
+from zfloc_stream.settings.loading import Settings, load_settings
+from zfloc_stream.io.session.schemas import encode_status, estimate_from_status, status_to_json
 from zfloc_stream.estimation.local_refinement import explained_share
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.monitor import ConsistencyMonitor
-from zfloc_stream.rng import make_rng
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.stream.monitor import ConsistencyMonitor
+from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 from zfloc_stream.sim.trajectory import trajectory_through
-from zfloc_stream.sim2 import wrap_angle
+from zfloc_stream.geometry.sim2 import wrap_angle
 
 
 def _run(scene, frames, settings=None):
@@ -236,7 +236,7 @@ def test_a_floorplan_and_its_caches_are_freed_after_use():
     import gc
     import weakref
 
-    from zfloc_stream.floorplan import Floorplan
+    from zfloc_stream.plans.floorplan import Floorplan
 
     scene = build_scene("rooms", seed=0)
     frames = list(simulate(scene, SimSettings(width=80, height=60), seed=0, n_frames=10))
@@ -394,7 +394,7 @@ def test_frame_hits_rescale_about_the_camera_only_under_metric_odometry():
     from types import SimpleNamespace
 
     from zfloc_stream.estimation.local_refinement import LocalRefinement
-    from zfloc_stream.sim2 import Sim2
+    from zfloc_stream.geometry.sim2 import Sim2
 
     mode = SimpleNamespace(id=1, alignment=Sim2(1.1, 0.3, (2.0, -1.0)))
     hits, camera = np.array([[3.0, 1.0], [1.0, 4.0]]), np.array([1.0, 1.0])

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.errors import UsageError, ZflocError
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.sim import SimSettings, build_scene, simulate
 
 

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from localizer_helpers import Kidnapped, carried_off, estimate_bits, run_localizer, settings_with
 
-from zfloc_stream import round_scheduler as round_scheduler_module
-from zfloc_stream.config import load_settings
+from zfloc_stream.stream import scheduler as round_scheduler_module
+from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.errors import ConfigError, InputError
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import read_session, record_session
-from zfloc_stream.session.replay import replay_session, replay_settings
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.io.session import read_session, record_session
+from zfloc_stream.io.session.replay import replay_session, replay_settings
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 from zfloc_stream.tools import cli, replay_cli
 

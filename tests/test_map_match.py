@@ -5,10 +5,10 @@ and a run that never tracked ends with map_match's verdict (the CLI's `warning:`
 import numpy as np
 import pytest
 
-from zfloc_stream import tracking_policy as policy
-from zfloc_stream.config import Settings, TrackingSettings
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.map_match import MIN_JUDGED_FRAMES, MapMatch
+from zfloc_stream.tracking import policy
+from zfloc_stream.settings.loading import Settings, TrackingSettings
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.stream.map_match import MIN_JUDGED_FRAMES, MapMatch
 from zfloc_stream.sim import SimSettings, build_scene, simulate
 
 
@@ -66,8 +66,8 @@ def test_right_map_tracks_without_a_verdict(office_frames):
 def test_aces_camera_session_on_the_fhw_map_is_never_tracking():
     """The issue's case: frames 10-11 were `tracking` (confidence 0.95) 44-46 m off."""
     from shared_data import SHARED_DATA
-    from zfloc_stream.datasets.mcap import session_sequence
-    from zfloc_stream.plan_loading import load_floorplan
+    from zfloc_stream.io.datasets.mcap import session_sequence
+    from zfloc_stream.plans.loading import load_floorplan
 
     sessions = SHARED_DATA / "sessions"
     if not (sessions / "aces-camera-50" / "session.mcap").is_file():

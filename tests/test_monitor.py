@@ -4,11 +4,11 @@ just below and just above, on a floorplan whose wall distances are exact."""
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation.local_refinement import explained_share
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.monitor import REFERENCE_MIN_FRAMES, ConsistencyMonitor
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.stream.monitor import REFERENCE_MIN_FRAMES, ConsistencyMonitor
+from zfloc_stream.geometry.sim2 import Sim2
 
 RES = 0.1  # m per cell
 IDENTITY = Sim2(1.0, 0.0, np.zeros(2))
@@ -170,7 +170,7 @@ def test_audit_margin_and_audit_min_violation_are_the_audit_boundaries():
     space through at least audit_min_violation of the tracked place's walls (its Cv)."""
     from types import SimpleNamespace
 
-    from zfloc_stream.kidnap_recovery import outscored
+    from zfloc_stream.stream.recovery import outscored
 
     old, far = IDENTITY, Sim2(1.0, 0.0, np.array([17.0, 0.0]))
     tracker = SimpleNamespace(pose_jumped=lambda a, b, xy, mode: bool(np.hypot(*np.subtract(a.t, b.t)) > 1.0))

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from session_helpers import camera_frames, laser_frames, record_laser_session, write_fake_session
 
-from zfloc_stream import session as S_pkg  # noqa: F401 - the package under test
-from zfloc_stream.config import load_settings
+from zfloc_stream.io import session as S_pkg
+from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.errors import BackboneError, FrameError, SessionLogError
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.frames import CameraFrame
-from zfloc_stream.localizer import Localizer
-from zfloc_stream.session import SessionWriter, read_session
-from zfloc_stream.session import schemas as S
+from zfloc_stream.stream.localizer import Localizer
+from zfloc_stream.io.session import SessionWriter, read_session
+from zfloc_stream.io.session import schemas as S
 
 K = np.array([[20.0, 0, 4], [0, 20.0, 3], [0, 0, 1]])
 
@@ -181,7 +181,7 @@ def test_run_and_export_read_a_cut_off_session_with_salvage(tmp_path, capsys):
 
 
 def test_drop_counter_warns_once_per_cause_and_sums_up():
-    from zfloc_stream.drops import DropCounter
+    from zfloc_stream.io.drops import DropCounter
 
     drops = DropCounter("bag.mcap")
     with pytest.warns(UserWarning) as caught:

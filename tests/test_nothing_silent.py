@@ -9,11 +9,11 @@ import ezdxf
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.session import SessionWriter
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.session import SessionWriter
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools.cli import main
-from zfloc_stream.tum import read_tum, tum_line
+from zfloc_stream.io.tum import read_tum, tum_line
 
 N = 20
 
@@ -117,7 +117,7 @@ def layered_dxf(tmp_path):
 
 
 def test_dxf_layers_used_by_entities_count_and_a_misspelt_layer_is_refused(layered_dxf, tmp_path, capsys):
-    from zfloc_stream.vector_floorplan import load_vector_floorplan
+    from zfloc_stream.plans.vector import load_vector_floorplan
 
     walls = load_vector_floorplan(layered_dxf, layers=["WALLS"])
     every = load_vector_floorplan(layered_dxf)
@@ -159,7 +159,7 @@ def test_the_summary_says_how_the_run_went_how_fast_and_rmse_as_evo(walk, tmp_pa
 
 # --- small slips ----------------------------------------------------------------------------------
 def test_replay_check_of_a_session_cut_before_its_last_outputs_counts_what_it_checked(walk, tmp_path, capsys):
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.tools.replay_cli import main as replay
 
     tmp, scene, seq = walk
@@ -178,8 +178,8 @@ def test_replay_check_of_a_session_cut_before_its_last_outputs_counts_what_it_ch
 def test_overlay_breaks_the_path_where_the_estimate_jumps_to_another_place():
     import matplotlib.pyplot as plt
 
-    from zfloc_stream.overlay import jumps, overlay_figure
-    from zfloc_stream.sim2 import Sim2
+    from zfloc_stream.io.overlay import jumps, overlay_figure
+    from zfloc_stream.geometry.sim2 import Sim2
 
     plane = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], [1.5, 0.0, 0.0], [2.0, 0.0, 0.0]])
     here = Sim2(1.0, 0.0, np.array([1.0, 1.0]))
@@ -232,7 +232,7 @@ def test_every_command_help_has_examples(capsys):
 
 def test_the_public_classes_say_what_they_are_and_what_each_field_means():
     from zfloc_stream.estimate import Estimate
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
 
     assert "push(frame)" in Localizer.__doc__ and "Estimate" in Localizer.__doc__
     doc = Estimate.__doc__

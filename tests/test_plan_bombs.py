@@ -24,10 +24,10 @@ from plan_bombs import (
     svg_xxe,
 )
 
-from zfloc_stream.config import load_settings
+from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.errors import FloorplanError
 from zfloc_stream.tools.cli import main
-from zfloc_stream.vector_floorplan import load_vector_floorplan
+from zfloc_stream.plans.vector import load_vector_floorplan
 
 
 def _cli_error(path, tmp_path, capsys, *extra):

@@ -6,10 +6,10 @@ limit on what is read, named in its error. Small rasters with small budgets stan
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import FloorplanError
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.raster_files import coarsening, pooled
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.plans.raster_files import coarsening, pooled
 
 
 def rooms(h=120, w=160):
@@ -81,7 +81,7 @@ def test_vector_plan_over_max_cells_is_drawn_coarser_with_a_warning(tmp_path):
     raster); its lines stay the drawing's own. A 300 m drawing (36.5 M cells at 0.05 m) is
     under datasets.vector_floorplan.max_cells by default, so it loads."""
     from fuzz_inputs import BOX, write_dxf
-    from zfloc_stream.vector_floorplan import load_vector_floorplan
+    from zfloc_stream.plans.vector import load_vector_floorplan
 
     path = write_dxf(tmp_path / "room.dxf", BOX + [((0, 4), (6, 4))])  # 10 x 8 m + 1 m margins: 240 x 200 cells
     exact = load_vector_floorplan(path)

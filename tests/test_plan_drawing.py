@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from zfloc_stream.config import Settings
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.rng import make_rng
-from zfloc_stream.vector_floorplan import load_vector_floorplan
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.plans.vector import load_vector_floorplan
 
 # plan_drawing.py is the benchmark's (eval_real.py --plan-style), not the package's: loaded by
 # path, so the benchmarks folder never goes on sys.path (its fuzz_inputs.py would shadow ours)

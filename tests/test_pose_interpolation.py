@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from zfloc_stream.pose_interpolation import PoseTrack, interpolate_pose
+from zfloc_stream.geometry.pose_interpolation import PoseTrack, interpolate_pose
 
 S = 1_000_000_000
 

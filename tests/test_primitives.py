@@ -1,12 +1,12 @@
 import numpy as np
 import pytest
 
-from zfloc_stream.config import CircleSettings, LineSettings
+from zfloc_stream.settings.loading import CircleSettings, LineSettings
 from zfloc_stream.errors import InputError
-from zfloc_stream.geometry import LineSet
-from zfloc_stream.circle_fitting import angular_coverage_and_span
-from zfloc_stream.primitives import deduplicate_lines, extract_circles, extract_lines, grid_subsample
-from zfloc_stream.rng import make_rng
+from zfloc_stream.geometry.shapes import LineSet
+from zfloc_stream.primitives.circle_fitting import angular_coverage_and_span
+from zfloc_stream.primitives.extract import deduplicate_lines, extract_circles, extract_lines, grid_subsample
+from zfloc_stream.runtime.rng import make_rng
 
 LINES = LineSettings()
 CIRCLES = CircleSettings()
@@ -295,7 +295,7 @@ def test_grid_queries_return_what_a_scan_of_every_free_point_returns():
     they must return exactly the free points a scan of the whole cloud finds (the ball's in
     grid order, the band's sorted by index), on clouds sparse over a large area, dense,
     and with bands parallel, nearly parallel and oblique to the grid axes."""
-    from zfloc_stream.line_growing import free_points_in_ball, free_points_in_band, point_grid
+    from zfloc_stream.primitives.line_growing import free_points_in_ball, free_points_in_band, point_grid
 
     rng = make_rng(3, "grid-queries")
     for n, extent, cell in [(40, 300.0, 0.25), (3000, 12.0, 0.25), (2000, 5.0, 0.05), (500, 50.0, 1.5)]:

@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.errors import InputError, ZflocError
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.prior import Prior, inside_polygon
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 from zfloc_stream.sim.trajectory import trajectory_through
@@ -189,9 +189,9 @@ def test_settings_prior_is_the_constructions(symmetric):
 def test_head_start_confirms_at_birth():
     """PRIOR_HEAD_START: with confirm_rounds - 1 extra hits a mode is tracked in its first
     round; without, it waits for a second."""
-    from zfloc_stream.sim2 import Sim2
-    from zfloc_stream.tracking import HypothesisTracker
-    from zfloc_stream.tracking_policy import birth_hits
+    from zfloc_stream.geometry.sim2 import Sim2
+    from zfloc_stream.tracking.filter_bank import HypothesisTracker
+    from zfloc_stream.tracking.policy import birth_hits
 
     class Hyp:
         def __init__(self, alignment, score):
@@ -211,7 +211,7 @@ def test_cli_wrong_prior_warns_once_and_the_session_replays_with_it(tmp_path, ca
     global search, and the session log records the prior so a replay reproduces the run."""
     from pathlib import Path
 
-    from zfloc_stream.session import read_session
+    from zfloc_stream.io.session import read_session
     from zfloc_stream.tools.replay_cli import main as replay
 
     sample = Path(__file__).resolve().parents[1] / "replay" / "office-laser.mcap"

@@ -8,18 +8,18 @@ import pytest
 
 from plan_helpers import RES, building, observe  # synthetic floorplan + BEV helpers
 
-from zfloc_stream.config import Settings
+from zfloc_stream.settings.loading import Settings
 from zfloc_stream.errors import InputError
 from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
 from zfloc_stream.estimation.correspondences import BevSamples, floorplan_matches
 from zfloc_stream.estimation.model_generation import guided_models, solver_pool
 from zfloc_stream.estimation.scoring import implied_poses
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.geometry import CircleSet, LineSet
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.geometry.shapes import CircleSet, LineSet
 from zfloc_stream.observation import BevObservation
-from zfloc_stream.primitives import extract_circles, extract_lines
-from zfloc_stream.rng import make_rng
-from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.primitives.extract import extract_circles, extract_lines
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 # The solver tests exercise the minimal solvers alone, at the paper's free scale: the
 # correlative seeding is off here
@@ -222,7 +222,7 @@ def test_refinement_converges_without_scale_bias(plain):
     """From a perturbed start the LM + Huber refinement (on the wall-surface field) lands on
     the true alignment; with the plain f^c (0 inside thick walls) BEV walls could slide
     into the walls and inflate the scale."""
-    from zfloc_stream.field_fit import refine
+    from zfloc_stream.estimation.field_fit import refine
     from zfloc_stream.estimation.scoring import floorplan_scorer
 
     fp, truth, obs = plain
@@ -241,9 +241,9 @@ def test_truncated_loss_ignores_walls_the_map_lacks():
     # A map with one room; the scan also sees a wall 0.5 m beyond the room's right wall
     # that the map lacks. Plain Huber lets those points pull the fit; with
     # refine.outlier_distance they carry no weight and the true alignment stays put.
-    from zfloc_stream.config import RefineSettings
-    from zfloc_stream.field_fit import refine_batch
-    from zfloc_stream.floorplan import Floorplan
+    from zfloc_stream.settings.loading import RefineSettings
+    from zfloc_stream.estimation.field_fit import refine_batch
+    from zfloc_stream.plans.floorplan import Floorplan
 
     res = 0.05
     grid = np.zeros((140, 200), dtype=bool)  # 10 m x 7 m: the bottom, left and right walls of a 9 x 6 m room

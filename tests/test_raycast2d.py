@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from zfloc_stream.errors import InputError
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.frames import LaserFrame
 from zfloc_stream.sim.raycast2d import RangeSensor2D, beam_angles, cast_rays, to_laser_frame
 

@@ -12,11 +12,11 @@ import pytest
 
 from shared_data import SHARED_DATA
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
-from zfloc_stream.floorplan import Floorplan
+from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.frames import LaserFrame
-from zfloc_stream.localizer import Localizer
+from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.tools.cli import main as cli_main
 from laser_helpers import laser_run, write_carmen
 

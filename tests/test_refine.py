@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from plan_helpers import building, observe  # synthetic floorplan + BEV helpers
 
-from zfloc_stream.config import RefineSettings
-from zfloc_stream.field_fit import refine_batch
+from zfloc_stream.settings.loading import RefineSettings
+from zfloc_stream.estimation.field_fit import refine_batch
 from zfloc_stream.estimation.scoring import FaceField
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.geometry.sim2 import Sim2
 
 TRUTH = Sim2(1.1, 0.7, (3.0, -2.0))
 TRUE_ROW = np.array([TRUTH.t[0], TRUTH.t[1], TRUTH.theta, TRUTH.s])

@@ -9,11 +9,11 @@ import pytest
 
 from ros2_bag import BagWriter, mount, write_sensor_bag
 from zfloc_stream import Localizer, load_settings
-from zfloc_stream.datasets import detect_source, open_dataset
-from zfloc_stream.datasets.ros2 import find_topics, parse_topic_overrides
+from zfloc_stream.io.datasets import detect_source, open_dataset
+from zfloc_stream.io.datasets.ros2 import find_topics, parse_topic_overrides
 from zfloc_stream.errors import InputError
 from zfloc_stream.metrics import is_success, position_errors
-from zfloc_stream.session import record_session
+from zfloc_stream.io.session import record_session
 from zfloc_stream.sim import SimSettings, build_scene, simulate, simulate_laser
 from zfloc_stream.tools.cli import main
 
@@ -148,8 +148,8 @@ def test_protobuf_session_with_odometry_at_its_own_rate_localizes(tmp_path, apar
     from mcap_protobuf.writer import Writer
 
     from ros2_bag import base_poses_at
-    from zfloc_stream.session import read_session
-    from zfloc_stream.session import schemas as S
+    from zfloc_stream.io.session import read_session
+    from zfloc_stream.io.session import schemas as S
 
     frame_ns = [int(round((50.0 + k / 15) * 1e9)) for k in range(len(laser_run.frames))]
     odom_ns = [int(round((49.9 + 0.003 + j / 50) * 1e9)) for j in range(int((len(frame_ns) / 15 + 0.2) * 50))]

@@ -11,15 +11,15 @@ import cv2
 import numpy as np
 import pytest
 
-from zfloc_stream import frame_tree as F
-from zfloc_stream.config import Settings
-from zfloc_stream.plan_loading import load_floorplan
-from zfloc_stream.ros2_output import UNOBSERVED_VARIANCE
-from zfloc_stream.session import SessionWriter, read_session
-from zfloc_stream.session import schemas as S
+from zfloc_stream.geometry import frame_tree as F
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.plans.loading import load_floorplan
+from zfloc_stream.io.ros2_output import UNOBSERVED_VARIANCE
+from zfloc_stream.io.session import SessionWriter, read_session
+from zfloc_stream.io.session import schemas as S
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools.cli import main
-from zfloc_stream.tum import tum_line
+from zfloc_stream.io.tum import tum_line
 
 rosbags = pytest.importorskip("rosbags", reason="rosbags (the [test] extra) reads the ROS 2 output back")
 N = 16
@@ -227,8 +227,8 @@ def test_an_older_log_named_floorplan_replays_identically_and_rewrites_as_map(tm
     """replay/office-laser.mcap was written with the map frame called `floorplan`: its
     replay still matches it (decisions exactly, numbers within the stated tolerance: the
     file was recorded on another CPU), and the log a replay writes says `map` throughout."""
-    from zfloc_stream.session.compare import Tolerance
-    from zfloc_stream.session.replay import replay_session, replay_settings
+    from zfloc_stream.io.session.compare import Tolerance
+    from zfloc_stream.io.session.replay import replay_session, replay_settings
 
     sample = read_session(Path(__file__).resolve().parents[1] / "replay" / "office-laser.mcap")
     old, _ = _frame_ids(sample.path)
@@ -244,8 +244,8 @@ def test_an_older_log_named_floorplan_replays_identically_and_rewrites_as_map(tm
 
 def test_covariance_without_an_estimate_and_unknown_masks_that_do_not_fit():
     from zfloc_stream.errors import FloorplanError
-    from zfloc_stream.floorplan import Floorplan
-    from zfloc_stream.ros2_output import covariance_6x6
+    from zfloc_stream.plans.floorplan import Floorplan
+    from zfloc_stream.io.ros2_output import covariance_6x6
 
     for cov in (None, np.full((3, 3), np.nan)):  # no covariance: every axis unknown, none certain
         np.testing.assert_array_equal(np.reshape(covariance_6x6(cov), (6, 6)), np.eye(6) * UNOBSERVED_VARIANCE)

@@ -8,10 +8,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from zfloc_stream import round_scheduler
-from zfloc_stream.config import load_settings
-from zfloc_stream.geometry import CircleSet, LineSet
-from zfloc_stream.round_scheduler import RoundJob, RoundOutcome, RoundScheduler, lacking_evidence
+from zfloc_stream.stream import scheduler as round_scheduler
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.geometry.shapes import CircleSet, LineSet
+from zfloc_stream.stream.scheduler import RoundJob, RoundOutcome, RoundScheduler, lacking_evidence
 
 
 @pytest.fixture

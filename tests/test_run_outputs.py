@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.session import SessionWriter, record_session
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.session import SessionWriter, record_session
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools.cli import main
-from zfloc_stream.tum import read_tum, tum_line
+from zfloc_stream.io.tum import read_tum, tum_line
 
 N = 16
 
@@ -162,10 +162,10 @@ def _foxglove_client(url, received, ready, done):
 @pytest.mark.skipif(importlib.util.find_spec("foxglove") is None or importlib.util.find_spec("websockets") is None,
                     reason="needs foxglove-sdk (the [live] extra) and websockets (the [test] extra)")
 def test_live_view_serves_floorplan_bev_and_poses_to_a_websocket_client(laser, tmp_path):
-    from zfloc_stream.session import schemas as S
+    from zfloc_stream.io.session import schemas as S
     from zfloc_stream.tools.live import LiveServer
     from zfloc_stream.tools.session_runner import run_session
-    from zfloc_stream.trajectory_csv import read_trajectory_csv
+    from zfloc_stream.io.trajectory_csv import read_trajectory_csv
 
     tmp, scene, seq, truth = laser
     settings = Settings().model_copy(update={"logging": Settings().logging.model_copy(update={"bev_every_n_frames": 2})})
@@ -196,7 +196,7 @@ def test_live_view_serves_floorplan_bev_and_poses_to_a_websocket_client(laser, t
 def test_overlay_marks_the_start_colours_the_path_by_status_and_names_every_marker():
     import matplotlib.pyplot as plt
 
-    from zfloc_stream.overlay import STATUS_COLOURS, overlay_figure
+    from zfloc_stream.io.overlay import STATUS_COLOURS, overlay_figure
 
     plan = build_scene("rooms", seed=0).floorplan
     est = np.array([[np.nan] * 3, [1.0, 1.0, 0.0], [2.0, 1.0, 0.0], [3.0, 1.5, 0.5], [3.5, 2.0, 1.0]])

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
 
-from zfloc_stream.config import ScoringSettings
-from zfloc_stream.geometry import LineSet
+from zfloc_stream.settings.loading import ScoringSettings
+from zfloc_stream.geometry.shapes import LineSet
 from zfloc_stream.observation import BevObservation
 from zfloc_stream.estimation.scoring import (
     BevView,
@@ -17,7 +17,7 @@ from zfloc_stream.estimation.scoring import (
     sparse_line_points,
     transform_points,
 )
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.geometry.sim2 import Sim2
 
 # RES is re-exported for test files issue 25 still has importing it from here
 from plan_helpers import RES, building, observe  # noqa: F401

@@ -5,9 +5,9 @@ duplicates."""
 
 import numpy as np
 
-from zfloc_stream.config import ScoringSettings
+from zfloc_stream.settings.loading import ScoringSettings
 from zfloc_stream.estimation.scoring import descending_prefix, distinct, top_distinct
-from zfloc_stream.ties import descending
+from zfloc_stream.runtime.ties import descending
 
 
 def test_descending_prefix_is_a_prefix_of_descending():

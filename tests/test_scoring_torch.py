@@ -8,10 +8,10 @@ import pytest
 
 from plan_helpers import building, observe  # synthetic floorplan + BEV helpers
 
-from zfloc_stream.config import ScoringSettings, load_settings
+from zfloc_stream.settings.loading import ScoringSettings, load_settings
 from zfloc_stream.errors import BackboneError
 from zfloc_stream.estimation.scoring import BevView, floorplan_scorer, scoring_kernels, sparse_line_points
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.geometry.sim2 import Sim2
 
 torch = pytest.importorskip("torch")
 
@@ -66,7 +66,7 @@ def test_torch_kernels_equal_numpy(world, per):
 
 
 def test_localizer_with_torch_scoring_gives_the_same_estimates():
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.sim import build_scene
     from zfloc_stream.sim.simulator import SimSettings, simulate
 
@@ -101,7 +101,7 @@ def test_a_bad_scoring_device_is_one_clear_error(world):
 
 
 def test_the_scorer_backend_is_chosen_when_the_localizer_is_built(world, monkeypatch):
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.stream.localizer import Localizer
 
     fp, _, _ = world
     monkeypatch.setattr(floorplan_scorer(fp, ScoringSettings()), "_torch_kernels", {})

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.geometry import LineSet
-from zfloc_stream.segment_pairs import deduplicate_lines, segment_neighbours
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.geometry.shapes import LineSet
+from zfloc_stream.geometry.segment_pairs import deduplicate_lines, segment_neighbours
 
 
 def _segment_distances(a0, a1, b0, b1):
@@ -153,7 +153,7 @@ def test_line_only_dxf_fast_reader_equals_ezdxf(tmp_path, monkeypatch):
     from fuzz_inputs import write_dxf
     from plan_bombs import dxf_pieces
 
-    from zfloc_stream import plan_readers
+    from zfloc_stream.plans import readers as plan_readers
 
     rng = np.random.default_rng(5)
     lines = [((float(a), float(b)), (float(c), float(d))) for a, b, c, d in rng.uniform(0, 2000, (300, 4))] + [((1, 1), (1, 1))]

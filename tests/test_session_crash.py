@@ -13,7 +13,7 @@ import pytest
 from session_helpers import camera_frames
 
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 
 CHUNK_FRAMES = 3
 PENDING_BATCHES = 2  # background writer queue: one frame's inputs + outputs
@@ -26,8 +26,8 @@ CHILD = textwrap.dedent(
     import sys, time
     sys.path.insert(0, {tests!r})
     from session_helpers import camera_frames, fake_estimate
-    from zfloc_stream.config import load_settings
-    from zfloc_stream.session import SessionWriter
+    from zfloc_stream.settings.loading import load_settings
+    from zfloc_stream.io.session import SessionWriter
 
     settings = load_settings(overrides=["logging.chunk_max_frames={chunk}", "logging.chunk_size=100000000",
                                         "logging.max_pending_batches={pending}"])
@@ -84,11 +84,11 @@ def test_salvage_reads_every_finished_chunk(killed_session):
 ENGINE_CHILD = textwrap.dedent(
     """
     import sys
-    from zfloc_stream.config import load_settings
-    from zfloc_stream.localizer import Localizer
+    from zfloc_stream.settings.loading import load_settings
+    from zfloc_stream.stream.localizer import Localizer
     from zfloc_stream.sim.raycast2d import RangeSensor2D
-    from zfloc_stream.rng import make_rng
-    from zfloc_stream.session import SessionWriter
+    from zfloc_stream.runtime.rng import make_rng
+    from zfloc_stream.io.session import SessionWriter
     from zfloc_stream.sim import build_scene
     from zfloc_stream.sim.trajectory import random_walk
 

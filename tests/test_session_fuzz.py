@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from session_helpers import camera_frames, laser_frames, write_fake_session
 
-from zfloc_stream.config import load_settings
+from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.session import read_session
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.io.session import read_session
 
 N_CASES = 520
 

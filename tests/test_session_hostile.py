@@ -10,9 +10,9 @@ from mcap.writer import Writer
 from session_helpers import camera_frames, laser_frames, write_fake_session
 from session_hostile import ORDERS, frame_messages, ordered, write_messages
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 
 
 def _same_frames(got, frames):
@@ -54,8 +54,8 @@ def test_laser_topics_grouped_read_every_frame(tmp_path):
 
 def test_our_own_files_read_exactly_as_in_file_order(tmp_path):
     """A file in log-time order reads message for message as before (ties in file order)."""
-    from zfloc_stream.session.decoding import messages
-    from zfloc_stream.session.mcap_file import file_records
+    from zfloc_stream.io.session.decoding import messages
+    from zfloc_stream.io.session.mcap_file import file_records
 
     path = tmp_path / "ours.mcap"
     write_fake_session(path, camera_frames(12, seed=4, shape=(6, 8)), load_settings(overrides=["logging.chunk_max_frames=2"]))
@@ -178,7 +178,7 @@ def test_camera_frames_refuse_float_millimetres_said_to_be_metres():
 def test_undistortion_matches_opencv(model, D):
     import cv2
 
-    from zfloc_stream import lens
+    from zfloc_stream.frontend import lens
 
     h, w = 48, 64
     K = np.array([[40.0, 0, 31.5], [0, 41.0, 24.2], [0, 0, 1]])
@@ -195,7 +195,7 @@ def test_undistortion_matches_opencv(model, D):
 
 
 def test_distorted_sessions_are_undistorted_and_unknown_models_noted(tmp_path):
-    from zfloc_stream import lens
+    from zfloc_stream.frontend import lens
 
     frames = camera_frames(4, seed=3, shape=(24, 32))
     D = (-0.25, 0.05, 0.0, 0.0, 0.0)
@@ -255,7 +255,7 @@ def test_times_beyond_2_63_ns_are_one_error_line(tmp_path):
     # log times beyond 2^63 (MCAP allows up to 2^64) with sane header stamps read as usual
     write_messages(tmp_path / "log.mcap", frame_messages(laser_frames(4, beams=20)), log_time=lambda i, t: t + (1 << 63))
     assert len(list(read_session(tmp_path / "log.mcap").records())) == 4
-    from zfloc_stream.session import schemas as S
+    from zfloc_stream.io.session import schemas as S
 
     with pytest.raises(SessionLogError, match="before 2\\^63 ns"):
         S.seconds_to_ns(1e300)
@@ -298,7 +298,7 @@ def _bag(tmp_path, name="bag.mcap", n=30, **kw):
 
 
 def _bag_frames(path, settings=None):
-    from zfloc_stream.datasets.ros2 import bag_sequence
+    from zfloc_stream.io.datasets.ros2 import bag_sequence
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -323,7 +323,7 @@ def test_bags_out_of_log_time_order_read_the_same_frames(tmp_path, order):
 def test_a_shuffled_bag_beyond_the_reorder_limit_is_refused(tmp_path, monkeypatch):
     from session_hostile import rewrite
 
-    import zfloc_stream.datasets.ros2 as ros2
+    import zfloc_stream.io.datasets.ros2 as ros2
     from zfloc_stream.errors import InputError
 
     path, _ = _bag(tmp_path, n=40)
@@ -343,7 +343,7 @@ def test_bag_depth_in_float_millimetres_is_converted_with_one_warning(tmp_path):
 
 
 def test_bag_camera_info_distortion_is_removed(tmp_path):
-    from zfloc_stream import lens
+    from zfloc_stream.frontend import lens
 
     D = (-0.2, 0.04, 0.0, 0.0, 0.0)
     path, frames = _bag(tmp_path, distortion=D)

@@ -13,12 +13,12 @@ from session_helpers import camera_frames, fake_estimate, laser_frames, write_fa
 
 from shared_data import SHARED_DATA
 
-from zfloc_stream.config import Settings, load_settings
+from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.frames import CameraFrame
-from zfloc_stream.pose_interpolation import interpolate_pose
-from zfloc_stream.session import SessionWriter, read_session
-from zfloc_stream.session import schemas as S
+from zfloc_stream.geometry.pose_interpolation import interpolate_pose
+from zfloc_stream.io.session import SessionWriter, read_session
+from zfloc_stream.io.session import schemas as S
 
 INTEL = SHARED_DATA / "sessions" / "intel-camera-30"
 
@@ -98,7 +98,7 @@ def test_bev_grid_is_published_at_the_configured_rate(tmp_path):
 
 
 def test_settings_and_floorplan_travel_inside(tmp_path):
-    from zfloc_stream.floorplan import Floorplan
+    from zfloc_stream.plans.floorplan import Floorplan
 
     occ = np.zeros((40, 60), bool)
     occ[[0, -1], :] = occ[:, [0, -1]] = True

@@ -17,13 +17,14 @@ from session_helpers import camera_frames, laser_frames, write_fake_session
 
 from shared_data import SHARED_DATA
 
-from zfloc_stream.config import Settings, load_settings
-from zfloc_stream.datasets.mcap import session_sequence
+from zfloc_stream.settings.loading import Settings, load_settings
+from zfloc_stream.io.datasets.mcap import session_sequence
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.session import read_session
-from zfloc_stream.session import frame_index, stamps
-from zfloc_stream.session import reader as R
-from zfloc_stream.session import schemas as S
+from zfloc_stream.io.session import read_session
+from zfloc_stream.io.session import frame_index
+from zfloc_stream.io.session import stamps
+from zfloc_stream.io.session import reader as R
+from zfloc_stream.io.session import schemas as S
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "replay").glob("*.mcap"))

@@ -13,8 +13,8 @@ from session_helpers import record_laser_session
 
 from shared_data import SHARED_DATA
 
-from zfloc_stream.session import read_session
-from zfloc_stream.session import schemas as S
+from zfloc_stream.io.session import read_session
+from zfloc_stream.io.session import schemas as S
 from zfloc_stream.tools.replay_cli import main
 
 INTEL = SHARED_DATA / "sessions" / "intel-camera-30"
@@ -160,7 +160,7 @@ def test_session_of_another_tool_replays_with_a_floorplan(tmp_path, capsys):
 def test_floorplan_built_with_other_settings_still_replays(tmp_path, capsys):
     """The floorplan of a built-in scene has the default settings while the run uses
     seed 5: its settings are logged so the replay rebuilds the same primitives."""
-    from zfloc_stream.config import load_settings
+    from zfloc_stream.settings.loading import load_settings
 
     path = tmp_path / "seed5.mcap"
     record_laser_session(path, 12, settings=load_settings(overrides=["seed=5"]))
@@ -230,7 +230,7 @@ def test_a_changed_decision_is_a_divergence_at_its_frame(recorded, tmp_path, cap
     """A setting that changes when a mode is confirmed: the replay reports the first frame
     where the status topic differs (the confidence, which counts confirmations, moves before
     the status does), found independently by recording both runs."""
-    from zfloc_stream.config import load_settings
+    from zfloc_stream.settings.loading import load_settings
 
     changed = load_settings(overrides=["tracking.confirm_rounds=4"])
     base = record_laser_session(tmp_path / "a.mcap", N)
@@ -270,7 +270,7 @@ def test_a_swapped_mode_order_is_a_decision(tmp_path, capsys):
 
 
 def test_sessions_record_their_environment_and_a_replay_elsewhere_says_so(recorded, tmp_path, capsys):
-    from zfloc_stream.session import environment
+    from zfloc_stream.io.session import environment
 
     env = read_session(recorded).environment
     assert env == environment.current() and {"numpy", "scipy", "blas", "simd", "cpu", "zfloc_stream"} <= env.keys()
@@ -289,7 +289,7 @@ def test_sessions_record_their_environment_and_a_replay_elsewhere_says_so(record
 def test_the_numba_version_is_compared_only_when_recorded():
     """Sessions from before the compiled kernels do not record numba: not a difference.
     One that does and differs (its kernels may round differently) is reported."""
-    from zfloc_stream.session import environment
+    from zfloc_stream.io.session import environment
 
     here = environment.current()
     before_kernels = {k: v for k, v in here.items() if k != "numba"}
@@ -330,8 +330,8 @@ def test_a_session_recorded_before_a_setting_existed_replays_as_it_ran():
     re-recorded.)"""
     import copy
 
-    from zfloc_stream.config import Settings, settings_from_dict
-    from zfloc_stream.session.reader import as_recorded
+    from zfloc_stream.settings.loading import Settings, settings_from_dict
+    from zfloc_stream.io.session.reader import as_recorded
 
     old = Settings().model_dump()
     del old["estimator"]["correlative"]["scales"]

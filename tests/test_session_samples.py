@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from zfloc_stream.session import read_session
+from zfloc_stream.io.session import read_session
 from zfloc_stream.tools.replay_cli import main
 
 SAMPLES = sorted((Path(__file__).resolve().parents[1] / "replay").glob("*.mcap"))

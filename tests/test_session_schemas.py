@@ -8,7 +8,7 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from session_helpers import fake_estimate, rotation
 
 from zfloc_stream.errors import SessionLogError
-from zfloc_stream.session import schemas as S
+from zfloc_stream.io.session import schemas as S
 
 
 def test_time_conversions_round_trip():

@@ -17,10 +17,10 @@ from pydantic import BaseModel
 
 from fuzz_inputs import hostile_setting
 
-from zfloc_stream.config import Settings, allowed_range, load_settings
+from zfloc_stream.settings.loading import Settings, allowed_range, load_settings
 from zfloc_stream.errors import ConfigError, FloorplanError
-from zfloc_stream.floorplan import Floorplan
-from zfloc_stream.session import record_session
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.io.session import record_session
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 FRAMES = 6  # a RANSAC round happens at frame 5 with the default every_k_frames

@@ -5,11 +5,11 @@ import pytest
 
 from zfloc_stream.errors import ConfigError, InputError
 from zfloc_stream.frames import CEILING, FLOOR, OTHER, UNKNOWN, WALL, CameraFrame, LaserFrame
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.sim import (Connection, LaserSimSettings, Room, SimSettings, build_scene, camera_pose,
                               drift_odometry, intrinsics, make_scene, random_walk, render, simulate,
                               simulate_laser, snap, trajectory_through)
-from zfloc_stream.sim2 import wrap_angle
+from zfloc_stream.geometry.sim2 import wrap_angle
 
 QUIET = dict(depth_noise=0.0, scale_error=0.0, furniture_as_wall_prob=0.0, wall_dropout=0.0,
              odom_translation_noise=0.0, odom_yaw_noise_deg=0.0, camera_height_jitter=0.0)

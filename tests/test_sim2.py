@@ -2,7 +2,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from zfloc_stream.sim2 import Sim2
+from zfloc_stream.geometry.sim2 import Sim2
 
 finite = st.floats(-50, 50)
 transforms = st.builds(

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings as hyp_settings
 from hypothesis import strategies as st
 
-from zfloc_stream.config import SolverSettings
+from zfloc_stream.settings.loading import SolverSettings
 from zfloc_stream.estimation.solvers import (
     sample_scale_noise,
     scale_prior_sigma,
@@ -17,7 +17,7 @@ from zfloc_stream.estimation.solvers import (
     solve_3l,
     solve_lc,
 )
-from zfloc_stream.sim2 import Sim2, wrap_angle
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 EXACT = SolverSettings(scale_prior_window=0.0)  # GGD sigma = 0: 2L uses the prior exactly
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from zfloc_stream.config import Settings
-from zfloc_stream.datasets.base import Sequence, register
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.io.datasets.base import Sequence, register
 from zfloc_stream.errors import InputError
 from zfloc_stream.study import CELLS_FILE, chunk_starts, plan_cells, run_study
 from zfloc_stream.tools.study_cli import main
@@ -76,7 +76,7 @@ def test_resume_skips_finished_cells(tmp_path):
 @register("flaky-test")
 def _flaky(args, settings):
     """Two sequences; frames of the second raise in the middle of a chunk."""
-    from zfloc_stream.datasets import open_dataset
+    from zfloc_stream.io.datasets import open_dataset
 
     (good,) = open_dataset(GIBSON, settings)
 

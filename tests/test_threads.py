@@ -1,4 +1,4 @@
-"""estimator.threads: a round's independent pieces on several threads (zfloc_stream/threads.py)
+"""estimator.threads: a round's independent pieces on several threads (zfloc_stream/runtime/threads.py)
 give the single-threaded bits, whatever the thread count."""
 
 import threading
@@ -8,9 +8,9 @@ import pytest
 from draw_helpers import assert_same_bits, draw_scene, estimator_for
 from localizer_helpers import estimate_bits, run_localizer, settings_with
 
-from zfloc_stream import threads
+from zfloc_stream.runtime import threads
 from zfloc_stream.errors import ConfigError
-from zfloc_stream import field_fit
+from zfloc_stream.estimation import field_fit
 from zfloc_stream.estimation import correlative, model_generation, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
@@ -126,7 +126,7 @@ def test_localizer_gives_the_same_bits_with_any_thread_count(split_everything, c
 
 def office_snapshot():
     """A BEV snapshot of 20 laser scans through the office scene, passing a pillar."""
-    from zfloc_stream.config import load_settings
+    from zfloc_stream.settings.loading import load_settings
     from zfloc_stream.frontend.bev import RollingBEV
 
     scene = build_scene("office", seed=0)
@@ -147,7 +147,7 @@ def assert_same_observations(a, b, circles=True):
 def test_observation_jobs_on_threads_give_the_serial_observation():
     """The BEV observation's clustering, line extraction and clearance run side by side;
     the circle fits draw after the lines: the same observation (a pillar included)."""
-    from zfloc_stream.rng import make_rng
+    from zfloc_stream.runtime.rng import make_rng
 
     snapshot = office_snapshot()
     serial = snapshot.observation(make_rng(0, "obs"))
@@ -160,7 +160,7 @@ def test_observation_jobs_on_threads_give_the_serial_observation():
 def test_an_observation_without_circles_keeps_everything_else():
     """A floorplan without pillars cannot match a BEV circle, so rounds ask for none
     (circles=False): no circles, and the same lines, walls, free mask and clearance."""
-    from zfloc_stream.rng import make_rng
+    from zfloc_stream.runtime.rng import make_rng
 
     snapshot = office_snapshot()
     full = snapshot.observation(make_rng(0, "obs"))

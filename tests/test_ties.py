@@ -3,7 +3,7 @@ bits tie, and the tie goes to index order on every machine."""
 
 import numpy as np
 
-from zfloc_stream.ties import descending, tie_key, tie_keys
+from zfloc_stream.runtime.ties import descending, tie_key, tie_keys
 
 
 def test_last_bit_differences_tie_and_keep_index_order():

@@ -5,12 +5,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from zfloc_stream.config import TrackingSettings
+from zfloc_stream.settings.loading import TrackingSettings
 from zfloc_stream.errors import InputError
-from zfloc_stream.rng import make_rng
-from zfloc_stream.sim2 import Sim2, wrap_angle
-from zfloc_stream import tracking_policy as policy
-from zfloc_stream.tracking import HypothesisTracker, anchored_state
+from zfloc_stream.runtime.rng import make_rng
+from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
+from zfloc_stream.tracking import policy
+from zfloc_stream.tracking.filter_bank import HypothesisTracker, anchored_state
 
 
 @dataclass(frozen=True)

@@ -9,10 +9,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from zfloc_stream import tracking_policy as policy
-from zfloc_stream.config import TrackingSettings
-from zfloc_stream.sim2 import Sim2
-from zfloc_stream.tracking import HypothesisTracker, anchored_state
+from zfloc_stream.tracking import policy
+from zfloc_stream.settings.loading import TrackingSettings
+from zfloc_stream.geometry.sim2 import Sim2
+from zfloc_stream.tracking.filter_bank import HypothesisTracker, anchored_state
 
 S = TrackingSettings()
 
@@ -310,8 +310,8 @@ def test_odometry_jump_watch_judges_a_full_window_asks_the_bev_and_lets_the_next
     localizer.monitor_min_points and contradiction < tracking.odometry_jump_contradiction). The
     next frame decides: back near the track, a spike (nothing restarts); going on from
     the suspect frame, a jump. Window 0 never judges."""
-    from zfloc_stream.config import Settings
-    from zfloc_stream.odometry_jump import JUMPED, SUSPECT, OdometryJumpWatch
+    from zfloc_stream.settings.loading import Settings
+    from zfloc_stream.stream.odometry_jump import JUMPED, SUSPECT, OdometryJumpWatch
 
     settings = Settings(tracking={"odometry_jump_window": 3})
     lc, limit = settings.localizer, settings.tracking.odometry_jump_contradiction
@@ -345,8 +345,8 @@ def test_odometry_jump_min_known_share_is_the_seen_part_a_step_needs():
     """A step past the gate is explained only when at least odometry_jump_min_known_share of
     the frame's wall hits land on cells older frames saw (a camera turned 90 deg into rooms
     nobody saw: 49 of 9,885 hits), however few of those contradict them."""
-    from zfloc_stream.config import Settings
-    from zfloc_stream.odometry_jump import SUSPECT, OdometryJumpWatch
+    from zfloc_stream.settings.loading import Settings
+    from zfloc_stream.stream.odometry_jump import SUSPECT, OdometryJumpWatch
 
     settings = Settings(tracking={"odometry_jump_window": 3, "odometry_jump_min_known_share": 0.25})
     lc = settings.localizer

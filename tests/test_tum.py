@@ -9,10 +9,10 @@ import numpy as np
 
 from zfloc_stream.estimate import Estimate
 from zfloc_stream.errors import InputError
-from zfloc_stream.session import record_session
+from zfloc_stream.io.session import record_session
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.tools.cli import main
-from zfloc_stream.tum import TumWriter, export_session_tum
+from zfloc_stream.io.tum import TumWriter, export_session_tum
 
 import pytest
 
@@ -54,7 +54,7 @@ def test_tum_rows_are_planar_poses_with_yaw_quaternions(tmp_path):
 def test_repeated_stamps_keep_every_pose_and_both_writers_share_stamps(tmp_path):
     """One input stamp for every frame (belgioioso-camera-50) keeps every posed frame, and
     a ground-truth writer fed the same frames gets the same stamps (evo pairs them)."""
-    from zfloc_stream.tum import read_tum
+    from zfloc_stream.io.tum import read_tum
 
     with TumWriter(tmp_path / "est.tum") as est, TumWriter(tmp_path / "gt.tum") as gt:
         for i in range(6):
@@ -94,8 +94,8 @@ def test_run_writes_tum_beside_the_csv_and_export_rewrites_it_from_the_session(t
 
 
 def test_export_of_a_session_without_estimates_is_a_one_line_error(tmp_path, capsys):
-    from zfloc_stream.session import SessionWriter
-    from zfloc_stream.config import Settings
+    from zfloc_stream.io.session import SessionWriter
+    from zfloc_stream.settings.loading import Settings
 
     frames = simulate_laser("rooms", seed=0, n_frames=2).frames
     with SessionWriter(tmp_path / "inputs.mcap", Settings()) as log:

@@ -13,13 +13,13 @@ from shapely import affinity
 
 from zfloc_stream import Localizer, load_settings
 from zfloc_stream.errors import FloorplanError
-from zfloc_stream.plan_loading import load_floorplan
+from zfloc_stream.plans.loading import load_floorplan
 from zfloc_stream.metrics import is_success, position_errors
-from zfloc_stream.session import read_session, record_session
+from zfloc_stream.io.session import read_session, record_session
 from zfloc_stream.sim import build_scene, simulate_laser
 from zfloc_stream.sim.layout import wall_boxes
 from zfloc_stream.tools.cli import main
-from zfloc_stream.vector_floorplan import VectorFloorplan, load_vector_floorplan, merge_collinear
+from zfloc_stream.plans.vector import VectorFloorplan, load_vector_floorplan, merge_collinear
 
 RES = 0.05  # the raster cell of the scenes and of the vector plans' rasters
 CELL_DIAGONAL = RES * np.sqrt(2)

@@ -12,12 +12,12 @@ from frontend_scene import (
     world_to_plane,
 )
 
-from zfloc_stream.config import WallMaskSettings, load_settings
+from zfloc_stream.settings.loading import WallMaskSettings, load_settings
 from zfloc_stream.frames import CEILING, FLOOR, OTHER, WALL
 from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.frontend.labeller import depth_normals, label_frame
 from zfloc_stream.frontend.wallmask import refine_wall_mask, upright_rotation
-from zfloc_stream.rng import make_rng
+from zfloc_stream.runtime.rng import make_rng
 
 W, H = 160, 120
 K = intrinsics(W, H)

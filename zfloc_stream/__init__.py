@@ -8,9 +8,9 @@ numba.
 from importlib import import_module
 
 _PUBLIC = {
-    "Settings": ".config", "load_settings": ".config", "ZflocError": ".errors", "Alternative": ".estimate",
-    "Estimate": ".estimate", "Floorplan": ".floorplan", "CameraFrame": ".frames", "LaserFrame": ".frames",
-    "Localizer": ".localizer", "Sim2": ".sim2", "load_floorplan": ".plan_loading",
+    "Settings": ".settings.loading", "load_settings": ".settings.loading", "ZflocError": ".errors",
+    "Alternative": ".estimate", "Estimate": ".estimate", "Floorplan": ".plans.floorplan", "CameraFrame": ".frames",
+    "LaserFrame": ".frames", "Localizer": ".stream.localizer", "Sim2": ".geometry.sim2", "load_floorplan": ".plans.loading",
 }
 
 __all__ = sorted(_PUBLIC)

@@ -7,7 +7,7 @@ from typing import Literal
 
 import numpy as np
 
-from .sim2 import Sim2
+from .geometry.sim2 import Sim2
 
 Status = Literal["initializing", "tracking", "ambiguous", "lost"]
 STATUSES: tuple[str, ...] = ("initializing", "tracking", "ambiguous", "lost")

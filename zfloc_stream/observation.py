@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .geometry import CircleSet, LineSet
+from .geometry.shapes import CircleSet, LineSet
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ import numpy as np
 
 from .errors import InputError
 from .settings.prior import PriorSettings
-from .sim2 import wrap_angle
+from .geometry.sim2 import wrap_angle
 
 PRIOR = "prior"  # the solver label of the seeds a pose prior adds (estimation.results.Hypothesis.solver)
 

@@ -19,7 +19,7 @@ from ..errors import BackboneError
 
 # torch's guarded import and device choice live in torch_support (the torch scorer uses them
 # too); re-exported here for the backbones and the localizer
-from ..torch_support import INSTALL_HINT, TORCH_VERSION, choose_device, require_torch  # noqa: F401
+from ..runtime.torch_support import INSTALL_HINT, TORCH_VERSION, choose_device, require_torch  # noqa: F401
 
 
 class DepthBackbone(Protocol):

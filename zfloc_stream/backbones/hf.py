@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import BackboneSettings
+from ..settings.loading import BackboneSettings
 from ..errors import BackboneError
 from .base import choose_device, import_torch
 from .labels import class_codes, grouping_matrix

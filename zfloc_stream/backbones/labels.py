@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 
-from ..config import BackboneSettings
+from ..settings.loading import BackboneSettings
 from ..errors import BackboneError
 from ..frames import CEILING, FLOOR, OTHER, UNKNOWN, WALL
 

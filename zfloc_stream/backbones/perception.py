@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 
-from ..config import BackboneSettings
+from ..settings.loading import BackboneSettings
 from ..errors import FrameError
 from ..frames import CameraFrame
 from .base import DepthBackbone, SegmentationBackbone

@@ -23,13 +23,13 @@ from functools import lru_cache
 
 import numpy as np
 
-from .. import threads
-from ..config import RefineSettings
+from ..runtime import threads
+from ..settings.loading import RefineSettings
 from ..errors import InputError
-from ..geometry import LineSet
-from ..numba_support import njit
-from ..sim2 import Sim2, wrap_angle
-from ..field_fit import refine_batch
+from ..geometry.shapes import LineSet
+from ..runtime.numba_support import njit
+from ..geometry.sim2 import Sim2, wrap_angle
+from .field_fit import refine_batch
 from .plan_cache import cached_per_floorplan
 
 

@@ -11,10 +11,10 @@ import warnings
 import numpy as np
 from typing import Sequence
 
-from ..config import FloorplanSettings, LineSettings, Settings, SolverSettings
-from ..geometry import CircleSet, LineSet
+from ..settings.loading import FloorplanSettings, LineSettings, Settings, SolverSettings
+from ..geometry.shapes import CircleSet, LineSet
 from ..observation import BevObservation
-from ..primitives import deduplicate_lines
+from ..primitives.extract import deduplicate_lines
 from .draws import admissible_triplets
 from .plan_cache import cached_per_floorplan
 from .solvers import normal_angle

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..numba_support import njit
+from ..runtime.numba_support import njit
 
 
 @njit

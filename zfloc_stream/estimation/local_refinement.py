@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..field_fit import refine_batch
-from ..floorplan import Floorplan
+from .field_fit import refine_batch
+from ..plans.floorplan import Floorplan
 from ..settings.estimation import EstimatorSettings
 from ..settings.localizer import LocalizerSettings
-from ..sim2 import Sim2
+from ..geometry.sim2 import Sim2
 from .results import alignment_of, model_rows
 from .scoring import floorplan_scorer
 

@@ -9,11 +9,11 @@ import numpy as np
 
 from dataclasses import field
 
-from ..config import EstimatorSettings
-from ..field_fit import refine_batch
-from ..geometry import LineSet
+from ..settings.loading import EstimatorSettings
+from .field_fit import refine_batch
+from ..geometry.shapes import LineSet
 from ..observation import BevObservation
-from ..sim2 import Sim2, wrap_angle
+from ..geometry.sim2 import Sim2, wrap_angle
 from .correlative import correlative_models, plausible_angles
 from .correspondences import BevSamples, FloorplanMatches, line_angles, probabilities
 from .draws import draw

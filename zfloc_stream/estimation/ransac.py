@@ -49,13 +49,13 @@ import numpy as np
 import time
 from typing import Sequence
 
-from .. import threads
-from ..config import EstimatorSettings
+from ..runtime import threads
+from ..settings.loading import EstimatorSettings
 from ..errors import InputError
-from ..field_fit import refine_batch
+from .field_fit import refine_batch
 from ..observation import BevObservation
-from ..sim2 import Sim2
-from ..ties import descending, tie_keys
+from ..geometry.sim2 import Sim2
+from ..runtime.ties import descending, tie_keys
 from .correspondences import BevSamples, floorplan_matches, settings_of
 from .model_generation import correlative_seeds, guided_models, models_2c, models_2l, models_3l, models_lc, solver_pool
 from .results import CORRELATIVE, GUIDED, WARM, Hypothesis, LocalizationResult, alignment_of, model_rows

@@ -9,7 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..sim2 import Sim2
+from ..geometry.sim2 import Sim2
 
 WARM = "warm"
 CORRELATIVE = "correlative"

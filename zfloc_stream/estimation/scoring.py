@@ -36,15 +36,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import threads
-from ..config import ScoringSettings
+from ..runtime import threads
+from ..settings.loading import ScoringSettings
 from ..errors import InputError
-from ..geometry import LineSet
+from ..geometry.shapes import LineSet
 from ..observation import BevObservation
 from .views import COARSE_FAR, DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (transform_points: public here too)
-from ..sim2 import wrap_angle
-from ..numba_support import njit
-from ..ties import descending, tie_keys
+from ..geometry.sim2 import wrap_angle
+from ..runtime.numba_support import njit
+from ..runtime.ties import descending, tie_keys
 from .plan_cache import cached_per_floorplan
 
 # --------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..torch_support import choose_device, require_torch
+from ..runtime.torch_support import choose_device, require_torch
 from .views import COARSE_FAR, DEEP_FREE, FREE, transform_points
 
 _CACHE_CHUNK = 1 << 18  # elements per coarse-scoring chunk

@@ -34,10 +34,10 @@ import functools
 
 import numpy as np
 
-from .. import threads
-from ..config import ScaleMode, SolverSettings
-from ..numba_support import njit
-from ..sim2 import wrap_angle
+from ..runtime import threads
+from ..settings.loading import ScaleMode, SolverSettings
+from ..runtime.numba_support import njit
+from ..geometry.sim2 import wrap_angle
 from .draws import cumulate, draw_row, draw_uniforms
 
 MODEL_COLUMNS = ("tx", "ty", "theta", "s")

@@ -35,12 +35,12 @@ from collections import deque
 import cv2
 import numpy as np
 
-from ..config import Settings
+from ..settings.loading import Settings
 from ..errors import ConfigError, FrameError, InputError
 from ..frames import CEILING, FLOOR, WALL, CameraFrame, LaserFrame
 from ..observation import BevObservation
-from ..rng import make_rng
-from ..sim2 import Sim2
+from ..runtime.rng import make_rng
+from ..geometry.sim2 import Sim2
 from .bev_snapshot import BevSnapshot, wall_cells
 from .gravity import GravityEstimator, plane_pose
 from .labeller import bootstrap_floor_mask, depth_normals, label_frame

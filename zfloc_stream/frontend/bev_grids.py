@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..numba_support import njit
+from ..runtime.numba_support import njit
 
 
 @njit

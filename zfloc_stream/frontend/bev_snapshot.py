@@ -9,13 +9,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import threads
-from ..circle_fitting import circle_clusters, fit_circles
-from ..config import Settings
+from ..runtime import threads
+from ..primitives.circle_fitting import circle_clusters, fit_circles
+from ..settings.loading import Settings
 from ..errors import InputError
-from ..geometry import CircleSet, as_points
+from ..geometry.shapes import CircleSet, as_points
 from ..observation import BevObservation
-from ..primitives import extract_lines
+from ..primitives.extract import extract_lines
 from . import bev_grids
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import GravitySettings
+from ..settings.loading import GravitySettings
 from ..errors import InputError
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import LabellerSettings
+from ..settings.loading import LabellerSettings
 from ..frames import CEILING, FLOOR, OTHER, WALL
 
 # a neighbour farther than this fraction of the depth is across a depth edge: no normal there

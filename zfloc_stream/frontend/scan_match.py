@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..config import BevSettings, RefineSettings
-from ..field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
-from ..numba_support import njit
-from ..sim2 import wrap_angle
+from ..settings.loading import BevSettings, RefineSettings
+from ..estimation.field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
+from ..runtime.numba_support import njit
+from ..geometry.sim2 import wrap_angle
 
 
 @dataclass(frozen=True)

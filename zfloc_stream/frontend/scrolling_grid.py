@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from ..errors import FrameError
-from ..numba_support import njit
+from ..runtime.numba_support import njit
 
 MAX_CELL = 2.0**52  # cell indices stay exact integers in float64 and far inside int64
 

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import WallMaskSettings
+from ..settings.loading import WallMaskSettings
 from ..frames import WALL
-from ..numba_support import njit
+from ..runtime.numba_support import njit
 
 
 def upright_rotation(R_odom_cam: np.ndarray, gravity_odom: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, model_validator
 from pydantic_core import PydanticCustomError
 
-from ..documents import text_number_hint
+from .documents import text_number_hint
 
 
 def _plain(annotation):

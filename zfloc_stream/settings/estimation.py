@@ -182,7 +182,7 @@ class EstimatorSettings(Section):
     scoring: ScoringSettings = ScoringSettings()
     refine: RefineSettings = RefineSettings()
     ransac: RansacSettings = RansacSettings()
-    # Threads one round may use for its independent pieces (zfloc_stream/threads.py: the
+    # Threads one round may use for its independent pieces (zfloc_stream/runtime/threads.py: the
     # correlative angles, the 3L draws, scoring and refining batches of hypotheses; the
     # compiled kernels only): the same bits with any count. 0 (auto): the cores this
     # process may use (at most threads.AUTO_MAX), on the worker beside the stream too: a

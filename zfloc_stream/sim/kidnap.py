@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import InputError
-from ..rng import make_rng
+from ..runtime.rng import make_rng
 from .scenes import Scene
 from .trajectory import trajectory_through
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..floorplan import Floorplan
+from ..plans.floorplan import Floorplan
 from ..frames import LaserFrame
 
 

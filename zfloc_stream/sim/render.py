@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import CEILING, FLOOR, OTHER, UNKNOWN, WALL
-from ..sim2 import wrap_angle
+from ..geometry.sim2 import wrap_angle
 
 # camera axes expressed in a world frame whose yaw, pitch and roll are zero: optical axis
 # along world +x, image x (right) along world -y, image y (down) along world -z

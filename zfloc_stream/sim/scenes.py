@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import InputError
-from ..rng import make_rng
+from ..runtime.rng import make_rng
 from .layout import (RESOLUTION, Connection, Door, Grid, Room, build_walls, grid_around,
                      rasterize_boxes, rasterize_discs, snap, wall_boxes)
 
@@ -102,7 +102,7 @@ class Scene:
     @cached_property
     def floorplan(self):
         """The Floorplan of this scene (walls + pillars occupied, doors free, no furniture)."""
-        from ..floorplan import Floorplan  # late: floorplan.py depends on settings only
+        from ..plans.floorplan import Floorplan  # late: floorplan.py depends on settings only
 
         return Floorplan.from_occupancy(self.occupied, self.resolution, self.origin, name=self.name)
 

@@ -26,8 +26,8 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError, InputError
 from ..frames import OTHER, UNKNOWN, WALL, CameraFrame, LaserFrame
-from ..rng import make_rng
-from ..sim2 import Sim2, wrap_angle
+from ..runtime.rng import make_rng
+from ..geometry.sim2 import Sim2, wrap_angle
 from .render import box_distance, camera_pose, intrinsics, render
 from .scenes import Scene, build_scene
 from .trajectory import WalkSettings, random_walk

@@ -17,7 +17,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from ..errors import InputError
-from ..sim2 import wrap_angle
+from ..geometry.sim2 import wrap_angle
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Settings
+from ..settings.loading import Settings
 from ..errors import InputError, ZflocError
 from ..metrics import evaluate_run, position_errors
 from .plan import Cell, cell_settings
@@ -20,7 +20,7 @@ from .plan import Cell, cell_settings
 
 @lru_cache(maxsize=8)
 def _open_cached(spec: str, settings_json: str):
-    from ..datasets import open_dataset
+    from ..io.datasets import open_dataset
 
     return open_dataset(spec, Settings.model_validate_json(settings_json))
 
@@ -32,7 +32,7 @@ def threshold_key(t: float) -> str:
 def run_cell(cell: Cell, overrides: dict | None = None) -> dict:
     """Localize one chunk with one seed; a row of results. Never raises: a failure is
     reported in the row's `error` field."""
-    from ..localizer import Localizer
+    from ..stream.localizer import Localizer
 
     overrides = overrides or {}
     row = asdict(cell)

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..documents import load_yaml, read_document_text
-from ..config import Settings, dotted_to_nested, load_settings, merge_nested
+from ..settings.documents import load_yaml, read_document_text
+from ..settings.loading import Settings, dotted_to_nested, load_settings, merge_nested
 from ..errors import ConfigError
 
 
@@ -43,7 +43,7 @@ def chunk_starts(n_frames: int, length: int, max_chunks: int) -> list[int]:
 
 
 def plan_cells(datasets: Sequence[str], lengths: Sequence[int], seeds: Sequence[int], settings: Settings) -> list[Cell]:
-    from ..datasets import open_dataset
+    from ..io.datasets import open_dataset
 
     cells = []
     for spec in datasets:

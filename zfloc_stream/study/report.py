@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Settings
+from ..settings.loading import Settings
 from ..metrics import REFERENCE_THRESHOLD, summarize
 from .cells import threshold_key
 

@@ -8,7 +8,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from ..config import dump_settings, load_settings
+from ..settings.loading import dump_settings, load_settings
 from ..errors import InputError
 
 

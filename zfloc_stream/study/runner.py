@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..config import Settings, load_settings
+from ..settings.loading import Settings, load_settings
 from ..errors import InputError
 from .cells import run_cell
 from .plan import plan_cells

@@ -56,8 +56,8 @@ def _split(text: str | None) -> list[str] | None:
 
 def load_floorplan(args, settings):
     """The --floorplan of a command: a ROS map YAML, an image, or a DXF/SVG/GeoJSON drawing."""
-    from ..plan_loading import load_floorplan as load_plan
-    from ..vector_floorplan import VECTOR_SUFFIXES, load_vector_floorplan
+    from ..plans.loading import load_floorplan as load_plan
+    from ..plans.vector import VECTOR_SUFFIXES, load_vector_floorplan
 
     if args.floorplan.suffix.lower() in VECTOR_SUFFIXES:
         return load_vector_floorplan(args.floorplan, settings, scale=args.scale, layers=_split(args.layers), skip_layers=_split(args.skip_layers))
@@ -163,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def load_settings(*args, **kwargs):
     """config.load_settings, imported on first use (pydantic is not needed for --help)."""
-    from ..config import load_settings as load
+    from ..settings.loading import load_settings as load
 
     return load(*args, **kwargs)
 
@@ -271,20 +271,20 @@ def cmd_run(args) -> int:
     _check_live_options(args)
     prepare_out_dir(args.out, create=False)
     from ..backbones import Perception
-    from ..datasets import detect_source
-    from ..datasets.ros2 import parse_topic_overrides
+    from ..io.datasets import detect_source
+    from ..io.datasets.ros2 import parse_topic_overrides
     from .session_runner import run_session
 
     settings = _run_settings(args)
     topics = parse_topic_overrides(args.topic)
     window = None
     if args.scans is not None:
-        from ..mapping import parse_exclude
+        from ..plans.map_from_log import parse_exclude
 
         window = parse_exclude(args.scans, "--scans")
     groundtruth = None
     if args.groundtruth is not None:
-        from ..groundtruth import load_groundtruth
+        from ..io.groundtruth import load_groundtruth
 
         groundtruth = load_groundtruth(args.groundtruth, max_gap=settings.datasets.ros2.max_odometry_gap)
     floorplan = None
@@ -338,7 +338,7 @@ def cmd_run(args) -> int:
 
 
 def _report(outcome, settings) -> None:
-    from ..tum import moved_note
+    from ..io.tum import moved_note
     from .run_summary import report_lines
 
     extra = "".join(f", {p.name}" for p in (outcome.truth_tum_path, outcome.ros2_path) if p is not None)
@@ -352,7 +352,7 @@ def _report(outcome, settings) -> None:
 
 
 def cmd_export(args) -> int:
-    from ..tum import export_session_tum, moved_note
+    from ..io.tum import export_session_tum, moved_note
 
     out = export_session_tum(args.session, args.tum, salvage=args.salvage)
     print(f"wrote {args.tum} ({out.rows} poses)")
@@ -363,7 +363,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_config(args) -> int:
-    from ..config import dump_settings
+    from ..settings.loading import dump_settings
 
     sys.stdout.write(dump_settings(_settings(args)))
     return 0

@@ -35,9 +35,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     # imported here, not at the top: `zfloc-stream --help` builds this parser and must stay fast
-    from ..config import load_settings
-    from ..datasets.carmen import read_carmen
-    from ..mapping import map_from_log, parse_exclude
+    from ..settings.loading import load_settings
+    from ..io.datasets.carmen import read_carmen
+    from ..plans.map_from_log import map_from_log, parse_exclude
 
     settings = load_settings(args.config, args.set)
     exclude = [parse_exclude(text) for text in args.exclude]

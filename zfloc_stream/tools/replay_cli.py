@@ -112,12 +112,12 @@ def _checked_text(result, start: int, last: int) -> str:
 
 
 def run(args) -> int:
-    from ..plan_loading import load_floorplan
-    from ..session import read_session
-    from ..session.replay import replay_session, replay_settings, require_outputs
+    from ..plans.loading import load_floorplan
+    from ..io.session import read_session
+    from ..io.session.replay import replay_session, replay_settings, require_outputs
 
-    from ..session import environment
-    from ..session.compare import EXACT, Tolerance
+    from ..io.session import environment
+    from ..io.session.compare import EXACT, Tolerance
 
     args.check = args.check or args.exact
     session = read_session(args.session, salvage=args.salvage)

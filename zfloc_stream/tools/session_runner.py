@@ -14,16 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Settings
-from ..drops import DropCounter
+from ..settings.loading import Settings
+from ..io.drops import DropCounter
 from ..errors import InputError
 from ..estimate import STATUSES, Estimate
-from ..floorplan import Floorplan
+from ..plans.floorplan import Floorplan
 from ..metrics import run_rmse
-from ..overlay import save_overlay
-from ..session import SessionWriter
-from ..trajectory_csv import TrajectoryCsvWriter
-from ..tum import TumStamps, TumWriter
+from ..io.overlay import save_overlay
+from ..io.session import SessionWriter
+from ..io.trajectory_csv import TrajectoryCsvWriter
+from ..io.tum import TumStamps, TumWriter
 from .cli_support import Progress, prepare_out_dir, print_warning
 
 TUM_NAME = "trajectory.tum"  # beside trajectory.csv unless --tum names another path
@@ -132,7 +132,7 @@ def run_session(
     from contextlib import ExitStack
 
     out_dir = prepare_out_dir(out_dir)
-    from ..localizer import Localizer  # here: the compiled kernels (numba) load only once inputs are valid
+    from ..stream.localizer import Localizer  # here: the compiled kernels (numba) load only once inputs are valid
 
     localizer = Localizer(floorplan, settings, perception)
     if perception is not None:
@@ -152,7 +152,7 @@ def run_session(
         log = stack.enter_context(SessionWriter(out_dir / "session.mcap", settings, floorplan, listeners=() if live is None else (live,)))
         ros2_writer = None
         if ros2:
-            from ..ros2_output import Ros2Writer
+            from ..io.ros2_output import Ros2Writer
 
             ros2_writer = stack.enter_context(Ros2Writer(out_dir / ROS2_NAME, floorplan))
         bar = stack.enter_context(Progress(total, description, "frame", enabled=progress))

@@ -1,0 +1,221 @@
+"""The tracker's policy: every decision of the filter bank (tracking.py) as one pure
+function of the modes' numbers and the settings, each rule named.
+
+Scores are C = Cc - Cv of a RANSAC hypothesis; their levels depend on the map's style, so
+every rule compares scores with each other (a gap), never with a fixed level. Weights are
+softmax(weight_gain * running score) over the live modes.
+
+| rule | decision | setting |
+|---|---|---|
+| BEST_STARTS_A_MODE | the round's best unexplained hypothesis starts a mode | - |
+| BIRTH_GAP | another one starts a mode within birth_score_gap of the best | birth_score_gap |
+| PRIOR_HEAD_START | a mode born where the caller's prior vouches for it (prior.py) starts with more hits | prior.confirm_rounds |
+| NEAR_TOP | a mode counts a hit when within confirm_score_gap of the round's best | confirm_score_gap |
+| CONFIRMED | hits >= confirm_rounds (confirm_rounds_after_loss after a loss) | confirm_rounds, confirm_rounds_after_loss |
+| BEATEN_BY_RIVAL | the mode's match ranks below a hypothesis scoring lost_score_gap more: a collapse | lost_score_gap |
+| UNSEEN_COLLAPSES | nothing matched the mode while the round found something: a collapse | - |
+| COLLAPSED | lost_rounds collapses in a row: the tracked mode is lost | lost_rounds |
+| PRUNED | the tracked mode left the bank (pruned, merged away): lost | prune_weight, max_modes |
+| OVERTAKEN | an established rival is reported instead of the tracked mode: lost | rival_established_rounds |
+| AMBIGUITY | another confirmed mode holds >= ambiguity_ratio of the leader's weight | ambiguity_ratio |
+| THIN_EVIDENCE | the leader holds <= dominance_weight of the weight, or (not yet tracked) the round did not single it out | dominance_weight, confirm_score_gap |
+| TRACKED_KEEPS_ITS_PLACE | the tracked mode is reported unless an established rival outweighs it | rival_established_rounds |
+| NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
+| POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
+| MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share is not `tracking` | min_explained_share |
+| ODOMETRY_JUMP | an odometry step far beyond the recent motion whose hits the BEV does not explain: map and modes restart, `lost` | odometry_jump_window, odometry_jump_min_step, odometry_jump_min_turn_deg, odometry_jump_factor |
+
+docs/status.md has the table rule -> function -> setting -> test.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Protocol
+
+from ..settings.tracking import TrackingSettings
+from ..runtime.ties import tie_key
+
+BEST_STARTS_A_MODE = "best starts a mode"
+BIRTH_GAP = "birth gap"
+NEAR_TOP = "near the top"
+CONFIRMED = "confirmed"
+BEATEN_BY_RIVAL = "beaten by a rival"
+UNSEEN_COLLAPSES = "unseen collapses"
+COLLAPSED = "collapsed"
+PRUNED = "pruned"
+OVERTAKEN = "overtaken"
+WAITING_FOR_CONFIRMATION = "waiting for confirmation"
+AMBIGUITY = "ambiguity"
+THIN_EVIDENCE = "thin evidence"
+TRACKING = "tracking"
+TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
+NEWCOMER = "newcomer"
+POSE_JUMP = "pose jump"
+MAP_UNEXPLAINED = "map does not explain the frames"
+ODOMETRY_JUMP = "odometry jump"
+PRIOR_HEAD_START = "prior head start"
+
+
+class ModeNumbers(Protocol):
+    """What the policy reads of a mode (tracking.Mode)."""
+
+    id: int
+    weight: float
+    running_score: float
+    hits: int
+    collapses: int
+    near_top: bool
+
+
+# --- a round's hypotheses --------------------------------------------------------------
+def birth_rule(rank: int, score: float, best_score: float, s: TrackingSettings) -> str | None:
+    """Why the hypothesis ranked `rank` (0 = the round's best) that no mode explains starts
+    a mode, or None: the best always does (the first round already gives a pose), others
+    when within birth_score_gap of the best."""
+    if rank == 0:
+        return BEST_STARTS_A_MODE
+    return BIRTH_GAP if score >= best_score - s.birth_score_gap else None
+
+
+def birth_hits(head_start: int) -> int:
+    """PRIOR_HEAD_START: the hits a new mode starts with: its own sighting, plus those the
+    caller's prior lends it (the localizer gives tracking.confirm_rounds -
+    prior.confirm_rounds to a mode born inside an active prior in a round whose best
+    hypothesis lies inside it; 0 otherwise)."""
+    return 1 + max(0, int(head_start))
+
+
+def near_top(score: float, best_score: float, s: TrackingSettings) -> bool:
+    """NEAR_TOP: a fresh score within confirm_score_gap of the round's best (a hit)."""
+    return score >= best_score - s.confirm_score_gap
+
+
+def collapse_rule(rank: int | None, fresh: float, best_score: float, anything_found: bool, s: TrackingSettings) -> str | None:
+    """Why a mode collapses this round, or None. rank: the rank of the hypothesis it
+    matched (None: unmatched). Each hypothesis matches one mode, so rank > 0 means another
+    hypothesis scored best_score."""
+    if rank is None:
+        return UNSEEN_COLLAPSES if anything_found else None
+    return BEATEN_BY_RIVAL if rank > 0 and best_score - fresh > s.lost_score_gap else None
+
+
+# --- confirmation and status -------------------------------------------------------------
+def rounds_to_track(was_lost: bool, s: TrackingSettings) -> int:
+    """Hits a mode needs before it is tracked (CONFIRMED): confirm_rounds, and after a loss
+    at least confirm_rounds_after_loss (the evidence it took to drop a track is what it
+    takes to trust the next one: right after a loss the map has just shown it can fool the
+    tracker; aces laser window 0 #100 re-acquired a mode 43 m off after two sightings and
+    reported it `tracking` for 10 frames)."""
+    return max(s.confirm_rounds, s.confirm_rounds_after_loss) if was_lost else s.confirm_rounds
+
+
+def is_confirmed(mode: ModeNumbers, s: TrackingSettings) -> bool:
+    """Re-found near the top of confirm_rounds rounds: one round's best is not yet evidence."""
+    return mode.hits >= s.confirm_rounds
+
+
+def has_close_rival(leader: ModeNumbers, modes: Sequence[ModeNumbers], s: TrackingSettings) -> bool:
+    """AMBIGUITY: another confirmed mode carries at least ambiguity_ratio of the leader's
+    weight (at weight_gain g, a running-score gap under ln(1 / ambiguity_ratio) / g)."""
+    return any(m is not leader and is_confirmed(m, s) and m.weight >= s.ambiguity_ratio * leader.weight for m in modes)
+
+
+def singled_out(leader: ModeNumbers, modes: Sequence[ModeNumbers]) -> bool:
+    """No other mode was found near the top of the latest round: the round points at the
+    leader alone. Asked only before a mode starts to be tracked (a tracked mode meeting a
+    rival near the top is the collapse rule's business). belgioioso camera session: a mode
+    16 m off was confirmed in round 2 with a fresh score of 0.132 against a new rival's
+    0.125, its running score carried by round 1 alone."""
+    return not any(m is not leader and m.near_top for m in modes)
+
+
+def dominates(leader: ModeNumbers, s: TrackingSettings) -> bool:
+    """The leader's share of the bank's weight exceeds dominance_weight. Many newcomers
+    that each score close to it mean the data do not single it out yet (held-out laser
+    windows: a reported mode 15-60 m off had 0.3-0.45 of the weight, spread over 8 modes)."""
+    return leader.weight > s.dominance_weight
+
+
+def loss_rule(tracked: ModeNumbers | None, leader: ModeNumbers | None, s: TrackingSettings) -> str | None:
+    """Why the mode tracked so far is lost this round, or None: it left the bank (PRUNED),
+    collapsed lost_rounds rounds in a row (COLLAPSED), or an established rival is reported
+    instead (OVERTAKEN)."""
+    if tracked is None:
+        return PRUNED
+    if tracked.collapses >= s.lost_rounds:
+        return COLLAPSED
+    return OVERTAKEN if leader is not tracked else None
+
+
+def round_status_rule(leader: ModeNumbers | None, modes: Sequence[ModeNumbers], tracked_id: int | None,
+                      was_lost: bool, s: TrackingSettings) -> str:
+    """The round's decision when the tracked mode (if any) was not lost:
+    WAITING_FOR_CONFIRMATION (no leader with rounds_to_track hits), AMBIGUITY,
+    THIN_EVIDENCE, or TRACKING (the leader is tracked)."""
+    if leader is None or leader.hits < rounds_to_track(was_lost, s):
+        return WAITING_FOR_CONFIRMATION
+    if has_close_rival(leader, modes, s):
+        return AMBIGUITY
+    if not dominates(leader, s) or (tracked_id != leader.id and not singled_out(leader, modes)):
+        return THIN_EVIDENCE
+    return TRACKING
+
+
+# --- the reported mode ------------------------------------------------------------------
+def reported_mode(modes: Sequence[ModeNumbers], tracked: ModeNumbers | None, s: TrackingSettings) -> tuple[ModeNumbers | None, str | None]:
+    """(the mode to report, the rule that chose it). TRACKED_KEEPS_ITS_PLACE: the tracked
+    mode, unless the heaviest confirmed mode is another one re-found near the top in
+    rival_established_rounds rounds (then that one: the tracked mode is OVERTAKEN).
+    Untracked: the heaviest confirmed mode (the heaviest mode if none is confirmed), or
+    the NEWCOMER, the heaviest mode, when its running score leads it by more than
+    newcomer_score_gap (the confirmed ones kept failing to dominate; a new mode that
+    explains the data clearly better is the better guess while it earns confirmation)."""
+    if not modes:
+        return None, None
+    confirmed = [m for m in modes if is_confirmed(m, s)]
+    heaviest = max(confirmed or modes, key=lambda m: (tie_key(m.weight), -m.id))
+    if tracked is not None:
+        if heaviest is not tracked and heaviest.hits >= s.rival_established_rounds:
+            return heaviest, OVERTAKEN
+        return tracked, TRACKED_KEEPS_ITS_PLACE
+    newcomer = max(modes, key=lambda m: (tie_key(m.weight), -m.id))
+    if newcomer.running_score - heaviest.running_score > s.newcomer_score_gap:
+        return newcomer, NEWCOMER
+    return heaviest, None
+
+
+def pose_jumped(mahalanobis2: float, s: TrackingSettings) -> bool:
+    """POSE_JUMP: the change of the reported pose at the sensor, squared Mahalanobis under
+    the mode's pose covariance plus one measurement's, beyond pose_jump_chi2."""
+    return mahalanobis2 > s.pose_jump_chi2
+
+
+def map_explains(share: float | None, s: TrackingSettings) -> bool:
+    """MAP_UNEXPLAINED when False: under the reported alignment less than
+    min_explained_share of the latest BEV's wall points lie near a plan wall. The one rule
+    that compares with a level, not a gap: a gap says which place is best, not whether any
+    place in this map is right (aces camera session on the FHW map: `tracking`, weight
+    0.95, 44-46 m off, with 0.46 of its BEV explained; on its own map >= 0.61). None (no
+    BEV to judge yet) does not withhold `tracking`."""
+    return share is None or share >= s.min_explained_share
+
+
+def odometry_jumped(step: float, turn: float, recent_step: float, recent_turn: float, bev_explains: bool,
+                    s: TrackingSettings) -> bool:
+    """ODOMETRY_JUMP: the odometry moved the sensor by `step` metres and `turn` radians
+    (absolute) since the last fused frame, against at most recent_step and recent_turn
+    per frame over the last odometry_jump_window frames: a step beyond
+    odometry_jump_min_step + odometry_jump_factor * recent_step (or a turn likewise) is
+    implausible for the sensor's motion, and a jump unless the BEV explains the frame's
+    wall hits where the odometry put them (bev_explains: they land on cells older frames
+    saw, without contradicting them). A sparse log (1 m and 75 deg between scans) moves
+    that far and its hits fit; a VIO reset or a wheel slip of metres puts them where
+    nothing was seen, or across open space. Every frame's pose after a jump would be the
+    old alignment applied to the new odometry frame: metres to kilometres off."""
+    if bev_explains:
+        return False
+    far = step > s.odometry_jump_min_step + s.odometry_jump_factor * recent_step
+    turned = turn > math.radians(s.odometry_jump_min_turn_deg) + s.odometry_jump_factor * recent_turn
+    return bool(far or turned)
