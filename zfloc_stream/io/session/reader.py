@@ -305,7 +305,9 @@ class Session:
                     self.note_once(note, where)
             else:
                 scan, meta = parts[S.TOPIC_SCAN]
-                cfg = (self.settings or Settings()).logging
+                # the caller's settings first (a dataset spec's, run --set), as for the
+                # reorder limit: a foreign file logs none, so only the caller can set these
+                cfg = (self.read_settings or self.settings or Settings()).logging
                 rmin = _float_meta(meta, S.RANGE_MIN_KEY, cfg.foreign_scan_range_min, self.path)
                 rmax = _float_meta(meta, S.RANGE_MAX_KEY, cfg.foreign_scan_range_max, self.path)
                 axis = gt_meta.get(S.HEADING_AXIS_KEY, "x")
