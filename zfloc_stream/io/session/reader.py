@@ -368,7 +368,8 @@ def _float_meta(meta: dict, key: str, default: float, path: Path) -> float:
 def read_session(path: str | Path, salvage: bool = False, settings: Settings | None = None) -> Session:
     """Open a session file. Raises SessionLogError when it is missing, not MCAP, truncated
     (unless salvage), damaged, or lacks the input topics. settings: the reader's limits
-    (logging.reorder_max_mb); default the file's logged settings, else the defaults."""
+    (logging.reorder_max_mb, logging.foreign_scan_range_min / _max, datasets.ros2.max_odometry_gap);
+    default the file's logged settings, else the defaults."""
     path = Path(path)
     check_path(path)
     problems: list[str] = []
