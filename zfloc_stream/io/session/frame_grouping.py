@@ -33,7 +33,8 @@ class FrameGrouper:
         self.calibrations: list[tuple[int, object]] = []  # (stamp, message), in file order
         self.released_up_to = (-1, 0)
         self.session_warned_repeats = False
-        gap = (session.settings or Settings()).datasets.ros2.max_odometry_gap
+        # the caller's settings first (a dataset spec's, run --set), as for the reorder limit
+        gap = (session.read_settings or session.settings or Settings()).datasets.ros2.max_odometry_gap
         self.odometry = PoseTrack(S.TOPIC_ODOMETRY, gap)  # every odometry pose, for frames between its stamps
 
     def stamps(self, messages) -> Iterator[tuple[int, dict]]:

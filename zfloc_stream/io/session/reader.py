@@ -305,7 +305,9 @@ class Session:
                     self.note_once(note, where)
             else:
                 scan, meta = parts[S.TOPIC_SCAN]
-                cfg = (self.settings or Settings()).logging
+                # the caller's settings first (a dataset spec's, run --set), as for the
+                # reorder limit: a foreign file logs none, so only the caller can set these
+                cfg = (self.read_settings or self.settings or Settings()).logging
                 rmin = _float_meta(meta, S.RANGE_MIN_KEY, cfg.foreign_scan_range_min, self.path)
                 rmax = _float_meta(meta, S.RANGE_MAX_KEY, cfg.foreign_scan_range_max, self.path)
                 axis = gt_meta.get(S.HEADING_AXIS_KEY, "x")
@@ -366,7 +368,8 @@ def _float_meta(meta: dict, key: str, default: float, path: Path) -> float:
 def read_session(path: str | Path, salvage: bool = False, settings: Settings | None = None) -> Session:
     """Open a session file. Raises SessionLogError when it is missing, not MCAP, truncated
     (unless salvage), damaged, or lacks the input topics. settings: the reader's limits
-    (logging.reorder_max_mb); default the file's logged settings, else the defaults."""
+    (logging.reorder_max_mb, logging.foreign_scan_range_min / _max, datasets.ros2.max_odometry_gap);
+    default the file's logged settings, else the defaults."""
     path = Path(path)
     check_path(path)
     problems: list[str] = []
