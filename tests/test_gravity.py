@@ -21,12 +21,12 @@ def test_fit_plane_ignores_outliers():
     basis = np.linalg.svd(n_true[None])[2][1:]  # two in-plane directions
     pts = rng.uniform(-3, 3, (800, 2)) @ basis + 1.5 * n_true + rng.normal(0, 0.005, (800, 1)) * n_true
     outliers = rng.uniform(-3, 3, (400, 3))
-    n, c, inliers = fit_plane(np.concatenate([pts, outliers]), GravitySettings(), rng)
+    n, c, inliers = fit_plane(np.concatenate([pts, outliers]), rng)
     assert min(angle_deg(n, n_true), angle_deg(-n, n_true)) < 0.5
     assert abs(abs(c) - 1.5) < 0.02
     assert inliers[:800].mean() > 0.95 and inliers[800:].mean() < 0.1
     with pytest.raises(InputError):
-        fit_plane(np.zeros((2, 3)), GravitySettings(), rng)
+        fit_plane(np.zeros((2, 3)), rng)
 
 
 def test_rotation_from_up_keeps_odom_x_heading():

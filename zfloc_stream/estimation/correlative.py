@@ -32,6 +32,14 @@ from ..geometry.sim2 import Sim2, wrap_angle
 from .field_fit import refine_batch
 from .plan_cache import cached_per_floorplan
 
+# Rotations whose line-direction agreement with the floorplan (length-weighted direction
+# histograms, plausible_angles) is below this fraction of the best rotation's are not
+# searched: on a building whose walls run in two directions most of the angle grid cannot
+# put a wall on a wall. Low enough that the true rotation's agreement, cut by clutter and
+# a partial view, stays above it (was estimator.correlative.direction_ratio; every recorded
+# result used 0.3: the replay samples, eval_real, the benchmark scenes).
+DIRECTION_RATIO = 0.3
+
 
 @dataclass(frozen=True)
 class CorrelativeMatch:

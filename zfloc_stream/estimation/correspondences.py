@@ -17,7 +17,7 @@ from ..observation import BevObservation
 from ..primitives.extract import deduplicate_lines
 from .draws import admissible_triplets
 from .plan_cache import cached_per_floorplan
-from .solvers import normal_angle
+from .solvers import MIN_BASELINE, NORMAL_CONSISTENCY, PARALLEL_ANGLE_DEG, normal_angle
 
 
 def normal_angles(lines: LineSet) -> np.ndarray:
@@ -203,8 +203,8 @@ class FloorplanMatches:
         self.lines: LineSet = floorplan.lines
         self.circles: CircleSet = floorplan.circles
         self.line_angles = line_angles(self.lines)  # for solve_3l_indexed
-        tol = float(np.arccos(np.clip(solvers.normal_consistency, -1.0, 1.0)))
-        par = np.deg2rad(solvers.parallel_angle_deg)
+        tol = float(np.arccos(np.clip(NORMAL_CONSISTENCY, -1.0, 1.0)))
+        par = np.deg2rad(PARALLEL_ANGLE_DEG)
         alpha = normal_angles(self.lines)
         neighbours = [np.asarray(nb, dtype=np.int64) for nb in floorplan.line_neighbours] if len(self.lines) else []
         # 3L: a line, two of its neighbours, not all parallel (a bounded table: _nearest_neighbours)
@@ -224,15 +224,15 @@ class FloorplanMatches:
             pairs = pairs[~_parallel_mod_pi(alpha[pairs[:, 0]], alpha[pairs[:, 1]], par)]
         self.pairs = _AngleTable(pairs, (alpha[pairs[:, 1:]] - alpha[pairs[:, :1]]) if len(pairs) else np.zeros((0, 1)), tol)
         # LC: a line and a nearby circle off the line (floorplan units: lever * min_scale)
-        self.line_circle = _line_circle_pairs(self.lines, self.circles, fp_cfg.neighbour_distance, solvers.min_baseline * solvers.min_scale)
+        self.line_circle = _line_circle_pairs(self.lines, self.circles, fp_cfg.neighbour_distance, MIN_BASELINE * solvers.min_scale)
         # 2C: circle pairs sorted by centre distance (scale window -> one contiguous range)
-        cpairs, dist = _circle_pairs(self.circles, solvers.min_baseline * solvers.min_scale)
+        cpairs, dist = _circle_pairs(self.circles, MIN_BASELINE * solvers.min_scale)
         order = np.argsort(dist, kind="stable")
         self.circle_pairs, self.circle_dist = cpairs[order], dist[order]
 
 
 def floorplan_matches(floorplan, solvers: SolverSettings) -> FloorplanMatches:
-    key = (solvers.normal_consistency, solvers.parallel_angle_deg, solvers.min_baseline, solvers.min_scale)
+    key = (solvers.min_scale,)  # the only setting the tables depend on
     return cached_per_floorplan(floorplan, "ransac tuples", key, lambda: FloorplanMatches(floorplan, solvers))
 
 
@@ -247,7 +247,7 @@ class BevSamples:
     def __init__(self, obs: BevObservation, line_settings: LineSettings, solvers: SolverSettings, neighbour_distance: float):
         self.lines = deduplicate_lines(obs.lines, line_settings) if len(obs.lines) else obs.lines
         self.circles = obs.circles
-        par = np.deg2rad(solvers.parallel_angle_deg)
+        par = np.deg2rad(PARALLEL_ANGLE_DEG)
         alpha = normal_angles(self.lines)
         self.alpha = alpha
         # BEV segments are observed parts of floorplan walls, so two BEV lines can be
@@ -274,10 +274,10 @@ class BevSamples:
             self.triplets, triplet_weights = triplets(everyone())
         pairs = pairs_of(neighbours)
         self.pairs = pairs if len(pairs) else pairs_of(everyone())
-        self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, solvers.min_baseline)
+        self.line_circle = _line_circle_pairs(self.lines, self.circles, neighbour_distance, MIN_BASELINE)
         if not len(self.line_circle):
-            self.line_circle = _line_circle_pairs(self.lines, self.circles, np.inf, solvers.min_baseline)
-        self.circle_pairs, self.circle_dist = _circle_pairs(self.circles, solvers.min_baseline)
+            self.line_circle = _line_circle_pairs(self.lines, self.circles, np.inf, MIN_BASELINE)
+        self.circle_pairs, self.circle_dist = _circle_pairs(self.circles, MIN_BASELINE)
         # Sampling weights: a line sample is as trustworthy as its shortest line (short
         # segments are often clutter, door jambs or fragments with no floorplan match), so
         # samples are drawn with probability proportional to that length.

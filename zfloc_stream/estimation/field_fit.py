@@ -88,6 +88,20 @@ def huber_cost(r: np.ndarray, delta: float, cutoff: float = 0.0) -> np.ndarray:
     return np.where(a <= delta, 0.5 * a * a, delta * (a - 0.5 * delta)).sum(axis=-1)
 
 
+# m, residuals up to this weigh quadratically in the fit, beyond it linearly (Huber): the
+# spread of a good fit's residuals (a 0.05 m cell, range noise, wall thickness drawn a
+# little off) while farther points pull less; a caller matching something else passes its
+# own (scan_match, in units of its inlier distance). Was estimator.refine.huber_delta.
+HUBER_DELTA = 0.1
+# Levenberg-Marquardt damping: lambda starts at INITIAL_DAMPING (almost Gauss-Newton: a
+# start from RANSAC or from the last frame is near the minimum) and is divided by
+# DAMPING_FACTOR after a step that lowers the cost, multiplied after one that does not (the
+# textbook schedule). Were estimator.refine.initial_damping and damping_factor; every
+# recorded result used these (the replay samples, eval_real, the benchmark scenes).
+INITIAL_DAMPING = 1e-3
+DAMPING_FACTOR = 10.0
+
+
 def refine(
     field,
     points: np.ndarray,
@@ -95,9 +109,11 @@ def refine(
     settings: RefineSettings = RefineSettings(),
     scale_mode: ScaleMode = "free",
     scale_bounds: tuple[float, float] = (0.5, 2.0),
+    huber_delta: float = HUBER_DELTA,
 ) -> np.ndarray:
     """Refined model row (tx, ty, theta, s); the input model if nothing improves."""
-    return refine_batch(field, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds)[0]
+    return refine_batch(field, points, np.asarray(model, dtype=float).reshape(1, 4), settings, scale_mode, scale_bounds,
+                        huber_delta)[0]
 
 
 def refinable(points, models, settings: RefineSettings, scale_mode: ScaleMode, scale_bounds: tuple[float, float]):
@@ -366,6 +382,7 @@ def refine_batch(
     settings: RefineSettings = RefineSettings(),
     scale_mode: ScaleMode = "free",
     scale_bounds: tuple[float, float] = (0.5, 2.0),
+    huber_delta: float = HUBER_DELTA,
 ) -> np.ndarray:
     """Refine several models (H, 4) at once, each on its own (its own damping and
     stopping test), in the compiled LM loop above; ranges of models run on the round's
@@ -381,8 +398,8 @@ def refine_batch(
     P = np.ascontiguousarray(np.column_stack([models[ok, :3], log_s[ok]]))
     field_args = (grid.ravel(), w, h, float(field.origin[0]), float(field.origin[1]), float(field.resolution),
                   np.ascontiguousarray(pts))
-    lm_args = (free_scale, float(lo), float(hi), float(settings.huber_delta), float(settings.outlier_distance),
-               float(settings.initial_damping), float(settings.damping_factor), float(settings.tolerance),
+    lm_args = (free_scale, float(lo), float(hi), float(huber_delta), float(settings.outlier_distance),
+               float(INITIAL_DAMPING), float(DAMPING_FACTOR), float(settings.tolerance),
                int(settings.max_evaluations))
 
     def piece(r):  # models are refined one by one: ranges of them on the round's threads (threads.py)

@@ -14,7 +14,7 @@ from .field_fit import refine_batch
 from ..geometry.shapes import LineSet
 from ..observation import BevObservation
 from ..geometry.sim2 import Sim2, wrap_angle
-from .correlative import correlative_models, plausible_angles
+from .correlative import DIRECTION_RATIO, correlative_models, plausible_angles
 from .correspondences import BevSamples, FloorplanMatches, line_angles, probabilities
 from .draws import draw
 from .scoring import floorplan_scorer
@@ -120,7 +120,7 @@ def correlative_seeds(floorplan, obs: BevObservation, cfg: EstimatorSettings, sc
         scales = np.geomspace(cfg.solvers.min_scale, cfg.solvers.max_scale, c.scales + 2)[1:-1]
     else:
         scales = [scale_prior]
-    angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, c.direction_ratio)
+    angles = plausible_angles(obs.lines, floorplan.lines, c.angle_step_deg, DIRECTION_RATIO)
     models = np.concatenate([correlative_models(
         floorplan, obs.wall_points, float(scale), cell=c.cell, angle_step_deg=c.angle_step_deg, tolerance=c.tolerance,
         peaks=c.peaks, angles=angles, distinct_distance=c.distinct_distance, distinct_angle_deg=c.distinct_angle_deg,

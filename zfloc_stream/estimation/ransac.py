@@ -29,7 +29,7 @@ fixed -> one rigid two-line solver (labelled "2L", standing in for both 3L and 2
 Solvers whose primitives are missing (no circles -> no 2C / LC) are dropped.
 
 Scoring is coarse to fine (scoring.py: a coarse Cc for every model, the full C for the
-top_k distinct ones); the refine.top_n best of those are refined (field_fit.py: LM +
+top_k distinct ones); the REFINED_HYPOTHESES best of those are refined (field_fit.py: LM +
 Huber, truncated at refine.outlier_distance, on the wall-face field), rescored with the
 full C (a refinement is kept only if it does not lower C), and the list re-ranked and
 de-duplicated.
@@ -63,6 +63,12 @@ from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypo
 from .views import BevView
 from ..prior import PRIOR, BoundPrior
 
+# The best-ranked hypotheses LM-refined per round (field_fit.refine_batch): each costs up
+# to refine.max_evaluations passes over up to refine.max_points points, so only the best
+# few are refined; 10, as many as a round returns by default (ransac.max_hypotheses).
+# Was estimator.refine.top_n; every recorded result used 10.
+REFINED_HYPOTHESES = 10
+
 
 def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, cfg: EstimatorSettings) -> list[tuple]:
     """Refined, fully scored rows for the warm starts that no kept hypothesis stands for
@@ -89,7 +95,7 @@ def _labels_of(labels: list[tuple[str, int]], index: np.ndarray) -> list[str]:
 
 def _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg: EstimatorSettings, clock: list,
                  part: np.ndarray | None = None) -> tuple[list[tuple], np.ndarray]:
-    """Coarse-to-fine ranking, LM refinement of the top_n and de-duplication of the models
+    """Coarse-to-fine ranking, LM refinement of the REFINED_HYPOTHESES best and de-duplication of the models
     (those indexed by `part`, all by default): (model, C, Cc, Cv, label) rows best first,
     and the kept model rows. clock: [wall, cpu] moved on by the ranking's time (the
     round's "scoring" stage; the rest is its "refinement")."""
@@ -103,7 +109,7 @@ def _ranked_rows(floorplan, obs, view, models, labels, sparse, anchor, cfg: Esti
     total = ranking.scores.total.copy()
     cc = ranking.scores.consistency.copy()
     cv = ranking.scores.violation.copy()
-    n_refine = min(cfg.refine.top_n, len(top))
+    n_refine = min(REFINED_HYPOTHESES, len(top))
     scale_bounds = (cfg.solvers.min_scale, cfg.solvers.max_scale)
     if n_refine:
         field = floorplan_scorer(floorplan, cfg.scoring).face_field

@@ -42,6 +42,17 @@ from .draws import cumulate, draw_row, draw_uniforms
 
 MODEL_COLUMNS = ("tx", "ty", "theta", "s")
 
+# The solvers' degeneracy and consistency tests (were estimator.solvers.*; every recorded
+# result used these: the replay samples, eval_real, the benchmark scenes). They reject
+# samples that cannot give a model, not models a user might want: what a user sets is the
+# scale (scale_mode, min_scale, max_scale, prior_range, the scale prior's window and prob).
+NORMAL_CONSISTENCY = 0.95  # the paper's tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L), ~18 deg
+SCALE_PRIOR_GGD_SHAPE = 4.0  # 2L: shape of the generalised Gaussian on the metric scale (flat-topped: the prior's window is a soft box)
+PARALLEL_ANGLE_DEG = 10.0  # lines closer than this in direction count as parallel (their intersection is ill-conditioned)
+MIN_BASELINE = 0.3  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
+SINGULAR_TOLERANCE = 1e-9  # relative determinant below which a linear solve is degenerate (far above rounding)
+RADIUS_TOLERANCE = 0.5  # 2C/LC: model rejected when r_floorplan / (s r_bev) leaves [1/(1+x), 1+x] (pillar radii are rough)
+
 
 def _quiet(solver):
     """Non-finite or degenerate inputs are filtered by masks, never by warnings: silence
@@ -104,14 +115,14 @@ def scale_prior_sigma(scale_prior: float, settings: SolverSettings) -> float:
     """
     from scipy.special import gammaincinv  # here, not at import: a CLI error must not pay for it
 
-    beta = settings.scale_prior_ggd_shape
+    beta = SCALE_PRIOR_GGD_SHAPE
     a = settings.scale_prior_window * scale_prior
     return float(a / gammaincinv(1.0 / beta, settings.scale_prior_prob) ** (1.0 / beta))
 
 
 def sample_scale_noise(n: int, scale_prior: float, settings: SolverSettings, rng: np.random.Generator) -> np.ndarray:
     """n draws of eps ~ GGD(0, sigma, beta) from the given generator."""
-    beta = settings.scale_prior_ggd_shape
+    beta = SCALE_PRIOR_GGD_SHAPE
     sigma = scale_prior_sigma(scale_prior, settings)
     magnitude = rng.gamma(1.0 / beta, 1.0, size=n) ** (1.0 / beta)
     sign = np.where(rng.random(n) < 0.5, -1.0, 1.0)
@@ -130,7 +141,7 @@ def sample_scale_noise(n: int, scale_prior: float, settings: SolverSettings, rng
 
 # A sample is solved exactly only when its scale, computed the short way (_screen_3l), lies
 # within the bounds widened by this factor: far beyond any rounding difference between the
-# two ways (a regular system's determinant is >= singular_tolerance times its row norms),
+# two ways (a regular system's determinant is >= SINGULAR_TOLERANCE times its row norms),
 # so the models kept are the same; at a metric prior ~93% of the samples end there.
 SCALE_SLACK = 1.05
 
@@ -350,9 +361,9 @@ def _rotation_table(bev_angles, fp_angles, *shifts):
 
 
 def _limits_3l(settings: SolverSettings) -> tuple:
-    sin_par = float(np.sin(np.deg2rad(settings.parallel_angle_deg)))
-    return (float(settings.normal_consistency), settings.min_scale / SCALE_SLACK, settings.max_scale * SCALE_SLACK, sin_par,
-            float(settings.singular_tolerance), float(settings.min_scale), float(settings.max_scale))
+    sin_par = float(np.sin(np.deg2rad(PARALLEL_ANGLE_DEG)))
+    return (float(NORMAL_CONSISTENCY), settings.min_scale / SCALE_SLACK, settings.max_scale * SCALE_SLACK, sin_par,
+            float(SINGULAR_TOLERANCE), float(settings.min_scale), float(settings.max_scale))
 
 
 def _lines(lines):
@@ -519,8 +530,8 @@ def _drawn_2l(starts, sizes, counts, uniform, p0, p1, rows, scales, bnx, bny, bd
 
 
 def _limits_2l(settings: SolverSettings) -> tuple:
-    sin_par = float(np.sin(np.deg2rad(settings.parallel_angle_deg)))
-    return float(settings.normal_consistency), sin_par, float(settings.min_scale), float(settings.max_scale)
+    sin_par = float(np.sin(np.deg2rad(PARALLEL_ANGLE_DEG)))
+    return float(NORMAL_CONSISTENCY), sin_par, float(settings.min_scale), float(settings.max_scale)
 
 
 def _rotation_2l(bev_angles, fp_angles):
@@ -638,7 +649,7 @@ def _radius_ok(r_bev, r_fp, s, settings: SolverSettings) -> np.ndarray:
     if r_bev is None or r_fp is None:
         return np.ones(np.shape(s), dtype=bool)
     ratio = np.asarray(r_fp, dtype=float) / (s * np.asarray(r_bev, dtype=float))
-    tol = 1.0 + settings.radius_tolerance
+    tol = 1.0 + RADIUS_TOLERANCE
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.isfinite(ratio) & (ratio <= tol) & (ratio * tol >= 1.0)
 
@@ -660,7 +671,7 @@ def solve_2c(
         return no_models()
     v, vp = c[:, 1] - c[:, 0], cp[:, 1] - cp[:, 0]
     lv, lvp = np.linalg.norm(v, axis=1), np.linalg.norm(vp, axis=1)
-    ok = (lv >= settings.min_baseline) & (lvp > 0)
+    ok = (lv >= MIN_BASELINE) & (lvp > 0)
     implied = lvp / np.where(ok, lv, 1.0)
     ok &= _scale_ok(implied, settings)
     s = np.ones(B) if scale_mode == "fixed" else implied
@@ -694,7 +705,7 @@ def solve_lc(
         return no_models()
     theta = normal_angle(m) - normal_angle(n)  # R n = m (first candidate)
     lever = np.einsum("ij,ij->i", n, c) + d  # signed distance of the BEV centre to its line
-    ok = np.abs(lever) >= settings.min_baseline
+    ok = np.abs(lever) >= MIN_BASELINE
     implied = (np.einsum("ij,ij->i", m, cp) + e) / np.where(ok, lever, 1.0)
     flip = implied < 0  # the other candidate (R n = -m) makes the scale positive
     theta = np.where(flip, theta + np.pi, theta)

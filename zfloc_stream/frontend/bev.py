@@ -60,6 +60,16 @@ SCAN_MATCH_MIN_CROP_CELLS = 3
 # The per-intrinsics ray tables are dropped once more than this many are held: cameras rarely
 # change their intrinsics, so a few suffice.
 RAY_CACHE_SIZE = 4
+# The grid's update and memory (were bev.*; every recorded result used these). A ray's
+# evidence is weaker than a hit's (bev.logodds_hit 0.85), so a wall stands after one
+# crossing ray; from the clamp, 3 hits make a free cell occupied and 9 rays stop an
+# occupied one being occupied, so old evidence can be overturned.
+LOGODDS_FREE = -0.4  # added to a cell crossed by a ray (once per frame)
+LOGODDS_MIN, LOGODDS_MAX = -2.0, 3.5  # the clamp
+FREE_MARGIN = 0.1  # m, rays stop this short of the obstacle they hit (two cells: range noise does not free a wall)
+MIN_WALL_POINTS_PER_CELL = 3  # camera: wall points one frame must put in a cell to count (isolated noisy points do not; laser: 1)
+AZIMUTH_BIN_DEG = 0.5  # camera free space: one ray per azimuth bin (at 10 m a bin is 0.09 m, under two cells)
+TRAJECTORY_LENGTH = 10000  # plane poses kept (a ring buffer: bounded memory, 1000 s at 10 Hz)
 
 
 class RollingBEV:
@@ -77,14 +87,12 @@ class RollingBEV:
             raise ConfigError("bev: resolution and window_radius must be > 0, recenter_distance >= 0")
         if f.pixel_stride < 0 or f.target_pixels < 1 or f.max_depth <= 0:
             raise ConfigError("frontend: pixel_stride must be >= 0, target_pixels >= 1 and max_depth > 0")
-        if b.azimuth_bin_deg <= 0 or b.trajectory_length < 1:
-            raise ConfigError("bev: azimuth_bin_deg must be > 0 and trajectory_length >= 1")
         half = int(np.ceil((b.window_radius + b.recenter_distance) / b.resolution))
         self.grid = ScrollingGrid(2 * half, b.resolution)
         self._slack = int(np.floor(b.recenter_distance / b.resolution))
         self.gravity = GravityEstimator(f.gravity, make_rng(self.settings.seed, "gravity"))
         self._pending: deque[CameraFrame] = deque()
-        self._trajectory = np.zeros((b.trajectory_length, 3))  # ring buffer: fixed memory
+        self._trajectory = np.zeros((TRAJECTORY_LENGTH, 3))  # ring buffer: fixed memory
         self._trajectory_count = 0
         self._ray_cache: dict = {}
         self.frames_added = 0
@@ -195,7 +203,7 @@ class RollingBEV:
         # free polygon: one vertex per beam (in beam order, whatever the mounting), stopping
         # short of the hit; no-returns give none
         centre = np.array([x, y])
-        free_r = np.where(valid, np.maximum(r - self.settings.bev.free_margin, 0.0), 0.0)
+        free_r = np.where(valid, np.maximum(r - FREE_MARGIN, 0.0), 0.0)
         self._fuse(centre, centre + free_r[:, None] * flat, hits, hits, min_wall_points=1)
         self._record_pose((x, y, yaw))
         self.frames_fused += 1
@@ -233,7 +241,7 @@ class RollingBEV:
             return
         mask = wall_cells(g.wall[r0:r1, c0:c1], g.hits[r0:r1, c0:c1], g.logodds[r0:r1, c0:c1], b)
         origin = np.array([(g.ix0 + c0) * g.res, (g.iy0 + r0) * g.res])
-        step = match_scan(mask, origin, g.res, hits, centre, b, max_shift, max_angle)
+        step = match_scan(mask, origin, g.res, hits, centre, max_shift, max_angle)
         if step is None:
             return
         dtheta, dt = step
@@ -330,12 +338,12 @@ class RollingBEV:
             self._match(xy[wall], sensor)
         xy, sensor = self._correct_points(xy), self._corrected(*sensor)
         centre = np.array(sensor[:2])
-        # free space: rays to floor points end there, rays to walls stop free_margin short
+        # free space: rays to floor points end there, rays to walls stop FREE_MARGIN short
         ray_end = is_floor | is_wall_label
         angles, ranges = self._azimuth_bins(centre, sensor[2], xy[ray_end], is_wall_label[ray_end])
         ends = centre + ranges[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
         # a wall stacks many pixels onto one cell; isolated (noisy) wall points do not count
-        self._fuse(centre, ends, xy[obstacle | wall], xy[wall], self.settings.bev.min_wall_points_per_cell)
+        self._fuse(centre, ends, xy[obstacle | wall], xy[wall], MIN_WALL_POINTS_PER_CELL)
         self._record_pose(sensor)
         self.frames_fused += 1
 
@@ -345,9 +353,9 @@ class RollingBEV:
             return np.zeros(0), np.zeros(0)
         rel = (xy - centre).astype(np.float32)  # float32: bins are 0.5 deg wide
         dist = np.hypot(rel[:, 0], rel[:, 1])
-        dist = np.where(is_wall, np.maximum(dist - self.settings.bev.free_margin, 0.0), dist)
+        dist = np.where(is_wall, np.maximum(dist - FREE_MARGIN, 0.0), dist)
         ang = (np.arctan2(rel[:, 1], rel[:, 0]) - yaw + np.pi) % (2 * np.pi) - np.pi  # relative to heading
-        width = np.deg2rad(self.settings.bev.azimuth_bin_deg)
+        width = np.deg2rad(AZIMUTH_BIN_DEG)
         b = np.floor(ang / width).astype(np.int64)
         b0 = b.min()
         free = np.zeros(b.max() - b0 + 1)
@@ -400,12 +408,12 @@ class RollingBEV:
                 inside = (hr >= lo_c[1]) & (hr < hi_c[1]) & (hc >= lo_c[0]) & (hc < hi_c[0])
                 mask[hr[inside] - lo_c[1], hc[inside] - lo_c[0]] = 0  # a frame never frees its own hits
                 # in place on the crop (a view of the grid); the clamp touches only the crop
-                np.add(region, np.float32(b.logodds_free), out=region, where=mask.view(bool))
-                np.maximum(region, np.float32(b.logodds_min), out=region)
+                np.add(region, np.float32(LOGODDS_FREE), out=region, where=mask.view(bool))
+                np.maximum(region, np.float32(LOGODDS_MIN), out=region)
                 seen = g.seen[lo_c[1] : hi_c[1], lo_c[0] : hi_c[0]]
                 np.copyto(seen, np.int32(g.stamp), where=mask.view(bool))
         flat_lo = g.logodds.reshape(-1)
-        flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, b.logodds_max)
+        flat_lo[hit_flat] = np.minimum(flat_lo[hit_flat] + b.logodds_hit, LOGODDS_MAX)
         increment(g.hits, hit_flat)
         g.seen.reshape(-1)[hit_flat] = g.stamp
         increment(g.wall, g.unique_flat(wall_hits, min_wall_points))

@@ -18,11 +18,18 @@ from ..observation import BevObservation
 from ..primitives.extract import extract_lines
 from . import bev_grids
 
+# Frames that saw wall evidence in a cell before it can be a wall: 1, a wall seen once
+# counts; the setting that filters clutter is bev.wall_min_ratio (was bev.wall_min_observations).
+WALL_MIN_OBSERVATIONS = 1
+# m, the observation is cropped to the known cells plus this margin: the free space and
+# clearance around the outermost walls stay in the crop (was bev.crop_margin)
+CROP_MARGIN = 0.5
+
 
 def wall_cells(wall: np.ndarray, hits: np.ndarray, logodds: np.ndarray, b) -> np.ndarray:
     """Cells that are BEV walls: wall evidence often enough, mostly seen as wall rather
     than as clutter, and occupied (the observation and the scan matcher read the same)."""
-    return (wall >= b.wall_min_observations) & (wall >= b.wall_min_ratio * hits) & (logodds > b.occupied_threshold)
+    return (wall >= WALL_MIN_OBSERVATIONS) & (wall >= b.wall_min_ratio * hits) & (logodds > b.occupied_threshold)
 
 
 class BevSnapshot:
@@ -38,7 +45,7 @@ class BevSnapshot:
         self.settings = settings
 
     def observation(self, rng: np.random.Generator, circles: bool = True) -> BevObservation:
-        """The cropped grids (known cells plus bev.crop_margin), the wall points, the free
+        """The cropped grids (known cells plus CROP_MARGIN), the wall points, the free
         mask, the clearance f^v and the primitives; circles=False skips the circles (no
         floorplan circle to match them: the pillar clustering is a round's largest
         primitive cost on a plan without pillars). The grid passes are compiled
@@ -51,15 +58,15 @@ class BevSnapshot:
         oldest = max(self.stamp - b.memory_frames if b.memory_frames else 0, self.since - 1)
         grids = (self.logodds, self.wall, self.hits, self.seen)
         any_wall, r_lo, r_hi, c_lo, c_hi = bev_grids.known_extent(
-            *grids, b.wall_min_observations, b.wall_min_ratio, occupied, use_recent, oldest)
+            *grids, WALL_MIN_OBSERVATIONS, b.wall_min_ratio, occupied, use_recent, oldest)
         if not any_wall:
             raise InputError("BEV has no wall points yet")
-        m = int(np.ceil(b.crop_margin / b.resolution))
+        m = int(np.ceil(CROP_MARGIN / b.resolution))
         r0, r1 = max(r_lo - m, 0), min(r_hi + m + 1, n)
         c0, c1 = max(c_lo - m, 0), min(c_hi + m + 1, n)
         origin = np.array([(self.ix0 + c0) * b.resolution, (self.iy0 + r0) * b.resolution])
         free, not_occupied, points = bev_grids.crop_masks(
-            *grids, r0, r1, c0, c1, b.wall_min_observations, b.wall_min_ratio, occupied, free_threshold,
+            *grids, r0, r1, c0, c1, WALL_MIN_OBSERVATIONS, b.wall_min_ratio, occupied, free_threshold,
             use_recent, oldest, origin[0], origin[1], b.resolution)
         prim = self.settings.primitives
 

@@ -36,7 +36,17 @@ def rotation_from_up(up_odom: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z])  # rows: plane axes in odom coordinates
 
 
-def fit_plane(points: np.ndarray, settings: GravitySettings, rng: np.random.Generator):
+# The floor-plane fit and its tracking (were frontend.gravity.*; every recorded result used
+# these: the replay samples' camera runs, eval_real's camera windows, the benchmark scenes).
+# What a user sets is when gravity is frozen (min_floor_points, min_frames) and what is kept.
+RANSAC_ITERATIONS = 100  # 3-point plane hypotheses: with half the points on the floor, P(no all-floor triple) = 0.875^100 ~ 2e-6
+INLIER_DISTANCE = 0.03  # m, point-to-plane distance of a floor inlier
+REFINE_ITERATIONS = 3  # PCA re-fits, each on the inliers of the previous fit
+POINTS_PER_FRAME = 1000  # floor points kept per frame (random subsample): many frames' views, not one frame's pixels
+FLOOR_HEIGHT_SMOOTHING = 0.2  # EMA factor of a frame's floor height once frozen: follows slow z drift, not one frame's noise
+
+
+def fit_plane(points: np.ndarray, rng: np.random.Generator):
     """Robust plane (unit normal n, offset c with n.x = c) through (N, 3) points.
 
     3-point RANSAC picks the inlier set, PCA re-fits on it (the normal is the direction of
@@ -45,7 +55,7 @@ def fit_plane(points: np.ndarray, settings: GravitySettings, rng: np.random.Gene
     pts = np.asarray(points, dtype=float)
     if len(pts) < 3:
         raise InputError(f"plane fit needs at least 3 points, got {len(pts)}")
-    k = settings.ransac_iterations
+    k = RANSAC_ITERATIONS
     idx = rng.integers(0, len(pts), size=(k, 3))
     a, b, c = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
     normals = np.cross(b - a, c - a)
@@ -56,18 +66,18 @@ def fit_plane(points: np.ndarray, settings: GravitySettings, rng: np.random.Gene
     normals = normals[ok] / norm[ok, None]
     offsets = np.einsum("ij,ij->i", normals, a[ok])
     # inlier counts of all hypotheses at once: (k, N) distances
-    counts = (np.abs(pts @ normals.T - offsets) < settings.inlier_distance).sum(axis=0)
+    counts = (np.abs(pts @ normals.T - offsets) < INLIER_DISTANCE).sum(axis=0)
     best = int(np.argmax(counts))
     n, off = normals[best], offsets[best]
-    inliers = np.abs(pts @ n - off) < settings.inlier_distance
-    for _ in range(settings.refine_iterations):
+    inliers = np.abs(pts @ n - off) < INLIER_DISTANCE
+    for _ in range(REFINE_ITERATIONS):
         if inliers.sum() < 3:
             break
         centre = pts[inliers].mean(axis=0)
         _, _, vt = np.linalg.svd(pts[inliers] - centre, full_matrices=False)
         n = vt[2]
         off = float(n @ centre)
-        inliers = np.abs(pts @ n - off) < settings.inlier_distance
+        inliers = np.abs(pts @ n - off) < INLIER_DISTANCE
     return n, float(off), inliers
 
 
@@ -135,8 +145,8 @@ class GravityEstimator:
             self.observe_floor_heights(pts @ self._R[2])
             return
         cfg = self.settings
-        if len(pts) > cfg.points_per_frame:
-            pts = pts[self._rng.choice(len(pts), cfg.points_per_frame, replace=False)]
+        if len(pts) > POINTS_PER_FRAME:
+            pts = pts[self._rng.choice(len(pts), POINTS_PER_FRAME, replace=False)]
         self._points = np.concatenate([self._points, pts])
         if len(self._points) > cfg.max_points:  # bounded: keep a random subset
             keep = np.sort(self._rng.choice(len(self._points), cfg.max_points, replace=False))
@@ -160,13 +170,13 @@ class GravityEstimator:
         h = np.asarray(heights, dtype=float)
         h = h[np.isfinite(h)]
         if len(h) and self._R is not None:
-            a = self.settings.floor_height_smoothing
+            a = FLOOR_HEIGHT_SMOOTHING
             m = float(np.median(h))
             self.floor_height = m if self.floor_height is None else (1 - a) * self.floor_height + a * m
 
     def _fit(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """(R_plane_odom, inlier mask) of the floor points so far."""
-        n, off, inliers = fit_plane(self._points, self.settings, rng)
+        n, off, inliers = fit_plane(self._points, rng)
         centre = self._centre_sum / max(self._frames, 1)
         # gravity points from the cameras towards the floor: the cameras are above the
         # plane along up = -gravity

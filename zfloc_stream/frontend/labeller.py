@@ -23,6 +23,12 @@ from ..frames import CEILING, FLOOR, OTHER, WALL
 
 # a neighbour farther than this fraction of the depth is across a depth edge: no normal there
 _MAX_EDGE_RATIO = 0.25
+# |n_z| (plane frame) below this: a vertical surface, tilted up to ~20 deg (depth normals
+# from finite differences are noisy) (was frontend.labeller.vertical_normal_max_z)
+VERTICAL_NORMAL_MAX_Z = 0.35
+# m, bootstrap floor candidates lie at least this far below the camera, which is carried
+# well above the floor (was frontend.labeller.bootstrap_min_below)
+BOOTSTRAP_MIN_BELOW = 0.5
 
 
 def depth_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
@@ -54,7 +60,7 @@ def label_frame(height: np.ndarray, normals: np.ndarray, valid: np.ndarray, sett
     nz = np.abs(normals[..., 2])
     has_normal = np.isfinite(nz)
     nz = np.nan_to_num(nz, nan=0.5)
-    vertical = has_normal & (nz < settings.vertical_normal_max_z)
+    vertical = has_normal & (nz < VERTICAL_NORMAL_MAX_Z)
     labels = np.where(valid, OTHER, 0).astype(np.uint8)
     labels[valid & vertical & (height > settings.wall_min_height)] = WALL
     # above head height anything not vertical is ceiling (normals blur at ceiling corners)
@@ -67,10 +73,10 @@ def label_frame(height: np.ndarray, normals: np.ndarray, valid: np.ndarray, sett
 def bootstrap_floor_mask(points_cam: np.ndarray, settings: LabellerSettings) -> np.ndarray:
     """Floor candidates (H, W) bool before gravity is known, from camera-frame points:
     surface normal within max_tilt_deg of the camera's up axis (-y) and at least
-    bootstrap_min_below below the camera (along its down axis +y)."""
+    BOOTSTRAP_MIN_BELOW below the camera (along its down axis +y)."""
     p = np.asarray(points_cam, dtype=float)
     valid = p[..., 2] > 0
     n = depth_normals(p, p[..., 2], valid, settings.normal_step)
     up = np.array([0.0, -1.0, 0.0])
     facing = np.abs(np.nan_to_num(n) @ up)  # the floor faces the camera, so |n . up| suffices
-    return valid & (facing > np.cos(np.deg2rad(settings.max_tilt_deg))) & (p[..., 1] > settings.bootstrap_min_below)
+    return valid & (facing > np.cos(np.deg2rad(settings.max_tilt_deg))) & (p[..., 1] > BOOTSTRAP_MIN_BELOW)

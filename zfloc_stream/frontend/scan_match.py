@@ -11,7 +11,7 @@ far; this module is that step, for the BEV: the scan's hits are aligned to the d
 field of the BEV's wall cells around them (rigid, Levenberg-Marquardt with a truncated
 Huber loss, so walls seen for the first time do not pull) about the sensor position, and
 the correction is kept only when it is a small step (odometry is good over one frame),
-lowers the robust cost by at least scan_match_min_gain (a smaller gain is the grid's
+lowers the robust cost by at least MIN_GAIN (a smaller gain is the grid's
 quantisation and the range noise being fitted) and does not lower the share of hits on BEV
 walls. The floorplan is never involved: a wrong
 localization hypothesis cannot bend the map toward itself.
@@ -39,11 +39,21 @@ class GridField:
     resolution: float
 
 
-# The fit's loss in units of scan_match_inlier_distance: quadratic (Huber) up to half of
+# m, a hit this close to a BEV wall is on it (three 0.05 m cells; was bev.scan_match_inlier_distance)
+INLIER_DISTANCE = 0.15
+# The fit's loss in units of INLIER_DISTANCE: quadratic (Huber) up to half of
 # it, so a hit on a wall pulls in proportion to its miss; a hit beyond twice it is furniture
 # or a wall the BEV has not seen yet and does not pull at all.
 HUBER_DELTA_PER_INLIER = 0.5
 OUTLIER_PER_INLIER = 2.0
+# The matcher's effort and its bar (were bev.scan_match_*; every recorded result used these:
+# the replay samples' laser run and eval_real's laser windows). What a user sets is which
+# frames are matched and how far one may move (bev.scan_match, scan_match_max_shift, ...).
+MIN_WALLS = 50  # BEV wall cells near the scan (and scan hits) needed to match; on fewer no match is tried
+MAX_POINTS = 200  # hits used (evenly thinned): a one-frame step needs few; the cost grows with them
+MAX_EVALUATIONS = 15  # LM cost evaluations per frame: a one-frame step from a good start converges in a few
+ANGLE_STEP_DEG = 0.5  # the coarse rotation search's step before the LM (at 15 m half a step moves a hit 0.065 m, inside INLIER_DISTANCE)
+MIN_GAIN = 0.2  # a correction must lower the hits' robust cost by this fraction (else it fits the grid's quantisation, not drift)
 
 def step_bounds(last_odometry, odometry, settings: BevSettings) -> tuple[float, float]:
     """The largest correction (metres, radians) scan matching may make to a frame whose
@@ -61,34 +71,34 @@ def step_bounds(last_odometry, odometry, settings: BevSettings) -> tuple[float, 
 
 
 def match_scan(wall_mask: np.ndarray, crop_origin: np.ndarray, resolution: float, hits: np.ndarray,
-               centre: np.ndarray, settings: BevSettings, max_shift: float, max_angle: float) -> tuple[float, np.ndarray] | None:
+               centre: np.ndarray, max_shift: float, max_angle: float) -> tuple[float, np.ndarray] | None:
     """Rigid correction (dtheta, dt) that moves the hits (plane frame) onto the walls of
     wall_mask (a BEV crop whose cell (0, 0) has its corner at crop_origin), as
     x' = R(dtheta) (x - centre) + centre + dt; None when the crop holds too few walls to
     match against or the step is refused."""
-    if wall_mask.sum() < settings.scan_match_min_walls or len(hits) < settings.scan_match_min_walls:
+    if wall_mask.sum() < MIN_WALLS or len(hits) < MIN_WALLS:
         return None
     # distance (m) from every crop cell to the nearest wall cell, about the sensor
     # (the 3x3 L2 approximation: a few percent off the exact distance, 4x cheaper on a
-    # 600x600 crop, and the loss is cut at 2 x inlier_distance anyway)
+    # 600x600 crop, and the loss is cut at 2 x INLIER_DISTANCE anyway)
     field = cv2.distanceTransform((~wall_mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_3)
     grid = GridField(field.astype(np.float64) * resolution, np.asarray(crop_origin, float) - centre, resolution)
-    points = thin_points(hits - centre, settings.scan_match_max_points)
-    near = settings.scan_match_inlier_distance
-    refine = RefineSettings(huber_delta=HUBER_DELTA_PER_INLIER * near, outlier_distance=OUTLIER_PER_INLIER * near,
-                            max_points=settings.scan_match_max_points, max_evaluations=settings.scan_match_max_evaluations)
+    points = thin_points(hits - centre, MAX_POINTS)
+    near = INLIER_DISTANCE
+    delta = HUBER_DELTA_PER_INLIER * near
+    refine = RefineSettings(outlier_distance=OUTLIER_PER_INLIER * near, max_points=MAX_POINTS, max_evaluations=MAX_EVALUATIONS)
     # LM from the odometry and from the best rotation; the rotated start wins only when it
-    # fits clearly better (by scan_match_min_gain, like any correction): where both fit
+    # fits clearly better (by MIN_GAIN, like any correction): where both fit
     # about as well the odometry is believed
-    theta = _best_rotation(grid.distance_field, grid.origin, resolution, points, refine.huber_delta,
-                           refine.outlier_distance, max_angle, np.deg2rad(settings.scan_match_angle_step_deg))
+    theta = _best_rotation(grid.distance_field, grid.origin, resolution, points, delta,
+                           refine.outlier_distance, max_angle, np.deg2rad(ANGLE_STEP_DEG))
     starts = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, theta, 1.0]][: 1 + (theta != 0.0)])
 
     def cost(p: np.ndarray) -> float:  # the fit's robust cost of hits placed at p
-        return huber_cost(_residuals(grid, p), refine.huber_delta, refine.outlier_distance)
+        return huber_cost(_residuals(grid, p), delta, refine.outlier_distance)
 
-    keep = 1.0 - settings.scan_match_min_gain  # a correction must bring the cost below this share
-    models = refine_batch(grid, points, starts, refine, "fixed")
+    keep = 1.0 - MIN_GAIN  # a correction must bring the cost below this share
+    models = refine_batch(grid, points, starts, refine, "fixed", huber_delta=delta)
     moved_by = [_moved(points, m) for m in models]
     costs = [cost(p) for p in moved_by]
     k = len(models) - 1 if costs[-1] < keep * costs[0] else 0

@@ -2,7 +2,7 @@
 
 In an upright (gravity-aligned) image every column is a vertical plane through the camera
 centre, so a vertical wall shows one depth per column. A column is dropped when any
-non-wall pixel lies deeper than the column's median wall depth + tau_d (the "wall" is then
+non-wall pixel lies deeper than the column's median wall depth + TAU_D (the "wall" is then
 furniture, or the column looks through a door: doors stay free); otherwise only the
 farthest depth-separated wall segment of the column is kept.
 
@@ -20,6 +20,14 @@ import numpy as np
 from ..settings.loading import WallMaskSettings
 from ..frames import WALL
 from ..runtime.numba_support import njit
+
+# The filter's thresholds (were frontend.wall_mask.*; the setting left is `enabled`). Every
+# recorded result used these: the replay samples' camera runs, eval_real's camera windows,
+# the benchmark scenes; the paper gives tau_d, not its value.
+TAU_D = 0.3  # m, a non-wall pixel deeper than the column's median wall depth + this drops the column (eqs. 3, 4)
+SEGMENT_GAP = 0.1  # m, a depth gap that splits a column's wall pixels into segments...
+SEGMENT_GAP_PER_M = 0.01  # ...plus this much per metre of depth (a depth camera's noise grows with depth)
+MIN_FORWARD_DEPTH = 0.05  # m, points closer than this to the upright image plane are not warped (the warp divides by it)
 
 
 def upright_rotation(R_odom_cam: np.ndarray, gravity_odom: np.ndarray) -> np.ndarray:
@@ -75,14 +83,14 @@ def refine_wall_points(
     # rotate upright (eq. 2); the compiled passes warp to the upright image column (eq. 1)
     up = (rays @ R_up_cam.T.astype(rays.dtype)) * depth[:, None]
     w_idx, w_col, w_d, deepest_other = _wall_columns(up, np.ascontiguousarray(is_wall), float(K[0, 0]), float(K[0, 2]),
-                                                     float(settings.min_forward_depth))
+                                                     float(MIN_FORWARD_DEPTH))
     if len(w_idx) == 0:
         return np.zeros(len(depth), dtype=bool)
     # wall pixels sorted by (column, depth): one float key (column-major, then depth) sorts
     # faster than a lexsort, and numpy's sort beats a compiled one here
     order = np.argsort(w_col * (float(w_d.max()) + 1.0) + w_d)
-    return _farthest_segments(order, w_idx, w_col, w_d, deepest_other, len(depth), float(settings.tau_d),
-                              float(settings.segment_gap), float(settings.segment_gap_per_m))
+    return _farthest_segments(order, w_idx, w_col, w_d, deepest_other, len(depth), float(TAU_D),
+                              float(SEGMENT_GAP), float(SEGMENT_GAP_PER_M))
 
 
 @njit

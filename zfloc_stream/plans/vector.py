@@ -201,8 +201,10 @@ class VectorFloorplan(Floorplan):
 
     @cached_property
     def lines(self) -> LineSet:
+        from ..primitives.line_growing import INLIER_DISTANCE  # compiled (numba): imported when first needed
+
         cfg = self.settings.primitives.lines
-        segs = merge_collinear(self.primitive_geometry.segments, cfg.dedup_angle_deg, cfg.inlier_distance, cfg.gap)
+        segs = merge_collinear(self.primitive_geometry.segments, cfg.dedup_angle_deg, INLIER_DISTANCE, cfg.gap)
         segs = segs[np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) >= cfg.min_length]
         return deduplicate_lines(LineSet.from_endpoints(segs), cfg) if len(segs) else LineSet.empty()
 

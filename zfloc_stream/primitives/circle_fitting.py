@@ -29,6 +29,22 @@ from ..runtime.numba_support import njit
 _TWO_PI = 2 * np.pi
 _EPS = float(np.finfo(np.float64).eps)
 
+# What makes a cluster of wall points a pillar (were primitives.circles.*; every recorded
+# result used these: the replay samples, eval_real, the benchmark scenes). Sized for 0.05 m cells and pillars of primitives.circles.min_radius to
+# max_radius (the settings a user sets: the pillars their building has); the tests below
+# are what separates a pillar from a wall fragment or a corner, not a matter of taste.
+GROUP_LINK_DISTANCE = 0.15  # m, points closer than this are one group (3 cells: a ring's gaps at 0.05 m cells link)
+MIN_CLUSTER_SIZE = 10  # points of a cluster (and of a group), below which no circle is fitted
+HDBSCAN_MIN_SAMPLES = 2  # small: a thin pillar ring has few points per neighbourhood (larger values drop arc points as noise)
+RANSAC_ITERATIONS = 100  # 3-point circle hypotheses per cluster
+INLIER_DISTANCE = 0.03  # m, radial distance of a RANSAC / refit inlier
+REFIT_ROUNDS = 2  # least-squares refit + inlier re-selection rounds
+REFIT_ITERATIONS = 10  # Gauss-Newton steps per refit (converges in a few from a RANSAC circle)
+MIN_INLIER_RATIO = 0.8  # of the cluster's points on the circle: a pillar's cluster is its ring, a wall's is not
+MIN_COVERAGE_DEG = 120.0  # 360 deg minus the largest angular gap: the inliers wrap at least a third of the way round
+MAX_GAP_DEG = 30.0  # angular continuity: consecutive gaps below this...
+MIN_SPAN_DEG = 90.0  # ...over a contiguous span at least this long (a corner's two lines leave a long hole)
+
 
 @njit
 def _root(parent, i):
@@ -404,7 +420,7 @@ def circle_clusters(pts: np.ndarray, settings) -> CircleClusters | None:
     no cluster is left. It takes no random numbers, so it can run beside the line
     extraction, whose draws come first (frontend/bev.py)."""
     s = settings
-    if len(pts) < s.min_cluster_size:
+    if len(pts) < MIN_CLUSTER_SIZE:
         return None
     # here, not at import: scipy.spatial and scikit-learn cost ~1 s to import
     import sklearn
@@ -412,18 +428,18 @@ def circle_clusters(pts: np.ndarray, settings) -> CircleClusters | None:
     from sklearn.cluster import HDBSCAN
 
     pts = np.ascontiguousarray(pts, dtype=np.float64)
-    max_width = 2 * s.max_radius + 2 * s.inlier_distance
-    pairs = cKDTree(pts).query_pairs(s.group_link_distance, output_type="ndarray").astype(np.int64)
-    keep, group = _groups(pts, pairs.reshape(-1, 2), max_width, s.min_cluster_size)
-    if len(keep) < s.min_cluster_size:
+    max_width = 2 * s.max_radius + 2 * INLIER_DISTANCE
+    pairs = cKDTree(pts).query_pairs(GROUP_LINK_DISTANCE, output_type="ndarray").astype(np.int64)
+    keep, group = _groups(pts, pairs.reshape(-1, 2), max_width, MIN_CLUSTER_SIZE)
+    if len(keep) < MIN_CLUSTER_SIZE:
         return None
     sub = pts[keep]
     # sklearn's own switch (thread-local) skips re-validating parameters the settings
     # already validated: ~0.3 ms a call, the same labels
     with sklearn.config_context(skip_parameter_validation=True):
         labels = HDBSCAN(
-            min_cluster_size=s.min_cluster_size,
-            min_samples=s.hdbscan_min_samples,
+            min_cluster_size=MIN_CLUSTER_SIZE,
+            min_samples=HDBSCAN_MIN_SAMPLES,
             allow_single_cluster=True,
             copy=True,
         ).fit_predict(sub).astype(np.int64)
@@ -441,15 +457,15 @@ def fit_circles(clusters: CircleClusters | None, settings, rng: np.random.Genera
     if clusters is None:
         return CircleSet.empty()
     # the draws: one block per cluster that is not too wide, in cluster order
-    blocks = [rng.integers(0, m, size=(s.ransac_iterations, 3)) for m in clusters.sizes.tolist() if m >= 0]
+    blocks = [rng.integers(0, m, size=(RANSAC_ITERATIONS, 3)) for m in clusters.sizes.tolist() if m >= 0]
     if not blocks:
         return CircleSet.empty()
     draws = np.concatenate(blocks).astype(np.int64)
     centres, radii = _clusters(
-        clusters.sub, clusters.labels, clusters.group, clusters.n_groups, clusters.sizes, draws, s.ransac_iterations,
-        s.inlier_distance, s.min_radius, s.max_radius, s.refit_rounds, s.refit_iterations, s.min_cluster_size,
-        s.min_inlier_ratio, float(np.deg2rad(s.max_gap_deg)), float(np.deg2rad(s.min_coverage_deg)),
-        float(np.deg2rad(s.min_span_deg)))
+        clusters.sub, clusters.labels, clusters.group, clusters.n_groups, clusters.sizes, draws, RANSAC_ITERATIONS,
+        INLIER_DISTANCE, s.min_radius, s.max_radius, REFIT_ROUNDS, REFIT_ITERATIONS, MIN_CLUSTER_SIZE,
+        MIN_INLIER_RATIO, float(np.deg2rad(MAX_GAP_DEG)), float(np.deg2rad(MIN_COVERAGE_DEG)),
+        float(np.deg2rad(MIN_SPAN_DEG)))
     if len(radii) == 0:
         return CircleSet.empty()
     return CircleSet(centres, radii)

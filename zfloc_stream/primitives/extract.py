@@ -2,7 +2,7 @@
 BEV and the floorplan.
 
 Lines: seeded region growing. A random unused seed gives, by PCA on its neighbourhood, an
-initial line; the line then collects every still-free point within `inlier_distance` of it
+initial line; the line then collects every still-free point within `line_growing.INLIER_DISTANCE` of it
 that is connected to the seed along the line (no gap longer than `gap`), is refitted by
 total least squares and grows again until its support stops changing.
 

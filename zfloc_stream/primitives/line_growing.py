@@ -3,13 +3,13 @@ seed loop in one kernel.
 
 A random unused seed (the order: rng.permutation(n), drawn in Python) gives, by PCA on its
 neighbourhood, an initial line; the line then collects every still-free point within
-inlier_distance of it that is connected to the seed along the line (no gap longer than
+INLIER_DISTANCE of it that is connected to the seed along the line (no gap longer than
 gap), is refitted by total least squares and grows again until its support stops
 changing. Growth runs inside a local window first (most seeds end there: short fragments,
 noise); only a line that reaches the window's rim regrows over all free points.
 
 Neighbourhoods: the points are sorted once into grid cells (row-major, cell side
-neighbourhood_radius); a ball query visits only the grid rows and columns it can reach
+NEIGHBOURHOOD_RADIUS); a ball query visits only the grid rows and columns it can reach
 (found by binary search, so its cost does not grow with the cloud) and tests each point
 there as dx*dx + dy*dy <= r*r, so it returns the same points in the same order as a scan
 of the whole cloud in grid order would. A line regrown over all free points reads only
@@ -35,6 +35,18 @@ from ..runtime.numba_support import njit
 # |normal component| below which a band is treated as parallel to a grid axis (its
 # interval along the other axis would be a division by ~0)
 _SLANT = 1e-6
+
+# The growing's inner tuning (were primitives.lines.*; every recorded result used these:
+# the replay samples, eval_real, the benchmark scenes).
+# They are in metres of the plane the points are in, sized for 0.05 m BEV and plan cells
+# and walls 0.1-0.3 m thick; what a user tunes is which lines count (gap, min_points,
+# min_length in the settings).
+NEIGHBOURHOOD_RADIUS = 0.25  # m, PCA neighbourhood of a seed: ~5 cells each side, enough to give a wall's direction
+MIN_SEED_NEIGHBOURS = 3  # a seed with fewer free points around it is noise (PCA of 2 points is any line through them)
+LOCAL_RADIUS = 2.0  # m, a line first grows inside this window around its seed: most seeds end there (speed only)
+INLIER_DISTANCE = 0.05  # m, orthogonal distance to grow a line: one cell, a wall face's rasterisation and range noise
+MAX_GROW_ITERATIONS = 20  # refit/regrow rounds per seed; growth converges in 2-4, this only bounds a pathological one
+CONVERGE_TOLERANCE = 0.001  # m, growth stops once a refit moves the line less than this (1/50 of a cell)
 
 @njit
 def _dot(x0, x1, y0, y1):
@@ -325,9 +337,9 @@ def extract_lines(pts: np.ndarray, settings, rng: np.random.Generator) -> LineSe
     perm = rng.permutation(n)
     s = settings
     normals, offsets, ends, support = _extract(
-        pts, perm.astype(np.int64), point_grid(pts, s.neighbourhood_radius),
-        s.neighbourhood_radius * s.neighbourhood_radius, s.local_radius * s.local_radius, s.min_seed_neighbours,
-        s.local_radius - s.gap, s.inlier_distance, s.gap, s.max_grow_iterations, s.converge_tolerance,
+        pts, perm.astype(np.int64), point_grid(pts, NEIGHBOURHOOD_RADIUS),
+        NEIGHBOURHOOD_RADIUS * NEIGHBOURHOOD_RADIUS, LOCAL_RADIUS * LOCAL_RADIUS, MIN_SEED_NEIGHBOURS,
+        LOCAL_RADIUS - s.gap, INLIER_DISTANCE, s.gap, MAX_GROW_ITERATIONS, CONVERGE_TOLERANCE,
         s.min_points, s.min_length)
     if len(offsets) == 0:
         return LineSet.empty()

@@ -18,13 +18,7 @@ ScaleMode = Literal["free", "prior", "fixed"]
 class LineSettings(Section):
     """Seeded region growing (paper 3.1)."""
 
-    neighbourhood_radius: float = Field(0.25, gt=0, le=5)  # m, PCA neighbourhood of a seed
-    min_seed_neighbours: int = Field(3, ge=2, le=1000)  # fewer free points around a seed: it is noise
-    local_radius: float = Field(2.0, gt=0, le=100)  # m, a line first grows inside this window around its seed (speed)
-    inlier_distance: float = Field(0.05, gt=0, le=1)  # m, orthogonal distance to grow a line
     gap: float = Field(0.3, gt=0, le=10)  # m, largest gap along a line before it is split
-    max_grow_iterations: int = Field(20, ge=1, le=1000)  # refit/regrow rounds per seed (usually converges in 2-4)
-    converge_tolerance: float = Field(0.001, gt=0, le=1)  # m, growth stops once a refit moves the line less than this
     min_points: int = Field(8, ge=2, le=100_000)
     min_length: float = Field(0.5, ge=0, le=100)  # m
     dedup_angle_deg: float = Field(5.0, ge=0, le=90)  # near-duplicate suppression
@@ -34,19 +28,8 @@ class LineSettings(Section):
 class CircleSettings(Section):
     """HDBSCAN clustering + 3-point RANSAC + angular checks (paper 3.1)."""
 
-    min_cluster_size: int = Field(10, ge=2, le=100_000)
-    hdbscan_min_samples: int = Field(2, ge=1, le=1000)  # small: a thin pillar ring has few points per neighbourhood (larger values drop arc points as noise)
-    ransac_iterations: int = Field(100, ge=1, le=100_000)
-    inlier_distance: float = Field(0.03, gt=0, le=1)  # m
     min_radius: float = Field(0.1, gt=0, le=10)  # m
     max_radius: float = Field(1.0, gt=0, le=10)  # m
-    min_inlier_ratio: float = Field(0.8, ge=0, le=1)
-    min_coverage_deg: float = Field(120.0, ge=0, le=360)  # 2*pi minus the largest angular gap
-    max_gap_deg: float = Field(30.0, gt=0, le=360)  # angular continuity: consecutive gaps below this...
-    min_span_deg: float = Field(90.0, ge=0, le=360)  # ...over a contiguous span at least this long
-    group_link_distance: float = Field(0.15, gt=0, le=10)  # m, points closer than this are one group; groups wider than a pillar are skipped
-    refit_rounds: int = Field(2, ge=0, le=100)  # least-squares refit + inlier re-selection rounds
-    refit_iterations: int = Field(10, ge=1, le=1000)  # Gauss-Newton steps per refit
 
     _ordered = ordered(("min_radius", "max_radius"))
 
@@ -58,17 +41,11 @@ class PrimitiveSettings(Section):
 
 class SolverSettings(Section):
     pool: list[SolverName] = Field(["3L", "2L", "2C", "LC"], min_length=1)
-    normal_consistency: float = Field(0.95, ge=0, le=1)  # tau_p: |cos(R n_i, n'_i)| required of the non-anchor lines (3L, 2L) before solving
-    scale_prior_ggd_shape: float = Field(4.0, gt=0, le=100)  # 2L: generalised Gaussian noise on the metric scale
     scale_prior_prob: float = Field(0.8, gt=0, lt=1)  # P(|eps| <= scale_prior_window * s) = this
     scale_prior_window: float = Field(0.1, ge=0, le=1)
     min_scale: float = Field(0.5, gt=0, le=100)  # models outside [min_scale, max_scale] are discarded
     max_scale: float = Field(2.0, gt=0, le=100)
     prior_range: float = Field(0.15, gt=0, le=10)  # prior mode: scales outside prior * [1 / (1 + r), 1 + r] are discarded too (depth cameras and VIO: a few %; monocular depth networks: ~10 %)
-    parallel_angle_deg: float = Field(10.0, ge=0, lt=90)  # lines closer than this in direction count as parallel (degenerate)
-    min_baseline: float = Field(0.3, ge=0, le=100)  # m (BEV units): 2C centres, or an LC centre and its line, closer than this are degenerate
-    singular_tolerance: float = Field(1e-9, gt=0, lt=1)  # relative determinant below which a linear solve is degenerate
-    radius_tolerance: float = Field(0.5, gt=0, le=10)  # 2C/LC: model rejected when r_floorplan / (s r_bev) leaves [1/(1+x), 1+x]
 
     _ordered = ordered(("min_scale", "max_scale"))
 
@@ -100,13 +77,9 @@ class ScoringSettings(Section):
 
 
 class RefineSettings(Section):
-    huber_delta: float = Field(0.1, gt=0, le=10)  # m
     max_evaluations: int = Field(30, ge=1, le=10_000)  # residual evaluations per hypothesis (converges in ~10)
-    top_n: int = Field(10, ge=1, le=1000)  # best-ranked hypotheses refined (field_fit.refine_batch, one model at a time)
     max_points: int = Field(1000, ge=10, le=1_000_000)  # BEV wall points used by the refinement (evenly thinned)
     tolerance: float = Field(1e-4, gt=0, le=1)  # stop: relative cost decrease, step or gradient below this
-    initial_damping: float = Field(1e-3, gt=0, le=1e6)  # Levenberg-Marquardt lambda at the start
-    damping_factor: float = Field(10.0, gt=1, le=1000)  # lambda divided by this after a good step, multiplied after a bad one
     # m, residuals beyond this carry no weight (a truncated Huber loss): points of a room the
     # map lacks, or clutter a drawn plan leaves out, stop pulling the fit. 0: plain Huber
     # (every point pulls): on plans that drew the fit up to 1.6 deg and 0.3 m off the true
@@ -143,11 +116,6 @@ class CorrelativeSettings(Section):
     # two placements are distinct when the BEV's centre lands farther apart than this...
     distinct_distance: float = Field(1.0, gt=0, le=1000)  # m
     distinct_angle_deg: float = Field(10.0, gt=0, le=180)  # ...or their rotations differ by more than this
-    # Rotations whose line-direction agreement with the floorplan (length-weighted
-    # direction histograms, correlative.plausible_angles) is below this fraction of the
-    # best rotation's are not searched: on a building whose walls run in two directions
-    # most of the angle grid cannot put a wall on a wall. 0: search every angle.
-    direction_ratio: float = Field(0.3, ge=0, le=1)
     # At a scale prior, a round that follows no live mode (the first ones, or after every
     # mode was lost) searches at this many scales spread geometrically over the prior's
     # range (solvers.prior_range), not at the prior alone: a depth network's global scale

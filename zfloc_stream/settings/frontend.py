@@ -24,13 +24,8 @@ class GravitySettings(Section):
     trust_odometry: bool = False  # VIO already gravity-aligned: take -z of odom as gravity
     min_floor_points: int = Field(300, ge=3, le=10_000_000)  # accumulated floor points needed before gravity is frozen
     min_frames: int = Field(2, ge=1, le=1000)  # frames contributing floor points before gravity is frozen
-    points_per_frame: int = Field(1000, ge=3, le=10_000_000)  # floor points kept per frame (random subsample)
     max_points: int = Field(10000, ge=3, le=10_000_000)  # cap on accumulated floor points
-    ransac_iterations: int = Field(100, ge=1, le=100_000)  # 3-point plane hypotheses
-    inlier_distance: float = Field(0.03, gt=0, le=1)  # m, point-to-plane distance of a floor inlier
-    refine_iterations: int = Field(3, ge=0, le=100)  # PCA re-fits on the inliers of the previous fit
     max_pending_frames: int = Field(20, ge=1, le=10_000)  # frames buffered while gravity is unknown (oldest dropped)
-    floor_height_smoothing: float = Field(0.2, ge=0, le=1)  # EMA factor of a frame's floor height (tracks slow z drift)
 
     _ordered = ordered(("min_floor_points", "max_points", "<="))
 
@@ -39,22 +34,16 @@ class WallMaskSettings(Section):
     """Gravity-aligned column filter on the wall mask (paper eqs. 1-5)."""
 
     enabled: bool = True
-    tau_d: float = Field(0.3, gt=0, le=10)  # m (paper's tau_d): a non-wall pixel deeper than median + tau_d drops the column
-    segment_gap: float = Field(0.1, gt=0, le=10)  # m, depth gap that splits a column's wall pixels into segments...
-    segment_gap_per_m: float = Field(0.01, ge=0, le=1)  # ...plus this much per metre of depth (noise grows with depth)
-    min_forward_depth: float = Field(0.05, gt=0, le=10)  # m, points closer than this to the upright image plane are not warped
 
 
 class LabellerSettings(Section):
     """Geometric labeller for frames without labels (gravity frame, depth normals)."""
 
     floor_tolerance: float = Field(0.08, gt=0, le=1)  # m, |height above floor| below this (and not vertical): floor
-    vertical_normal_max_z: float = Field(0.35, gt=0, le=1)  # |n_z| below this: a vertical surface
     wall_min_height: float = Field(0.3, ge=0, le=10)  # m above floor, lower vertical surfaces are clutter ("other")
     ceiling_min_height: float = Field(1.8, gt=0, le=10)  # m above floor, non-vertical surfaces higher than this: ceiling
     normal_step: int = Field(2, ge=1, le=100)  # px, finite-difference step for depth normals
     max_tilt_deg: float = Field(35.0, gt=0, le=90)  # bootstrap: floor normal within this of the camera's up axis
-    bootstrap_min_below: float = Field(0.5, ge=0, le=10)  # m, bootstrap floor candidates lie this far below the camera
 
     _ordered = ordered(("wall_min_height", "ceiling_min_height"))
 
@@ -79,18 +68,9 @@ class BevSettings(Section):
     window_radius: float = Field(15.0, gt=0, le=100)  # m, cells farther than this from the sensor are dropped
     recenter_distance: float = Field(1.0, ge=0, le=100)  # m, the grid scrolls when the sensor leaves this box around its centre
     logodds_hit: float = Field(0.85, gt=0, le=100)  # added to a cell holding an obstacle point (once per frame)
-    logodds_free: float = Field(-0.4, ge=-100, lt=0)  # added to a cell crossed by a ray (once per frame)
-    logodds_min: float = Field(-2.0, ge=-100, lt=0)  # clamp, so old evidence can be overturned
-    logodds_max: float = Field(3.5, gt=0, le=100)
     free_threshold: float = Field(-0.3, ge=-100, le=100)  # log-odds below this: observed free space
     occupied_threshold: float = Field(0.0, ge=-100, le=100)  # log-odds above this: occupied
-    wall_min_observations: int = Field(1, ge=1, le=1000)  # frames that saw wall evidence in a cell before it is a wall point
-    wall_min_ratio: float = Field(0.5, ge=0, le=1)  # ...and at least this fraction of the frames that hit the cell
-    min_wall_points_per_cell: int = Field(3, ge=1, le=10_000)  # camera: wall points one frame must put in a cell to count (laser: 1)
-    free_margin: float = Field(0.1, ge=0, le=10)  # m, rays stop this short of the obstacle they hit
-    azimuth_bin_deg: float = Field(0.5, ge=0.01, le=45)  # camera free space: one ray per azimuth bin
-    crop_margin: float = Field(0.5, ge=0, le=100)  # m, observation is cropped to the known cells plus this margin
-    trajectory_length: int = Field(10000, ge=1, le=1_000_000)  # plane poses kept (bounded memory)
+    wall_min_ratio: float = Field(0.5, ge=0, le=1)  # a wall cell: wall evidence in at least this fraction of the frames that hit it (bev_snapshot.WALL_MIN_OBSERVATIONS)
     # Odometry drifts, so evidence fused long ago sits where the drifted poses put it: a
     # cell no frame touched (hit or ray) in the last memory_frames fused frames is left
     # out of the observation (unknown again). 0: the grid remembers everything it holds.
@@ -106,20 +86,14 @@ class BevSettings(Section):
     # narrow field of view and a perfect odometry it drifted 6.8 deg in 30 simulated frames,
     # so it is opt-in) or "none".
     scan_match: Literal["none", "laser", "all"] = "laser"
-    scan_match_min_walls: int = Field(50, ge=3, le=1_000_000)  # BEV wall cells near the scan (and scan hits) needed to match
-    scan_match_max_points: int = Field(200, ge=10, le=1_000_000)  # hits used (evenly thinned)
-    scan_match_max_evaluations: int = Field(15, ge=1, le=10_000)  # LM cost evaluations per frame (a one-frame step from a good start converges in a few)
-    scan_match_inlier_distance: float = Field(0.15, gt=0, le=10)  # m, a hit this close to a BEV wall is on it (the loss is cut at twice this)
     scan_match_max_shift: float = Field(0.3, gt=0, le=100)  # m, a larger correction in one frame is refused (odometry is good over one frame)
     scan_match_max_angle_deg: float = Field(5.0, gt=0, le=180)
     # odometry errs in proportion to its motion: the bounds above grow by these fractions of
     # the step (m) and the turn since the last matched frame (frontend/scan_match.step_bounds)
     scan_match_shift_per_step: float = Field(0.2, ge=0, le=10)
     scan_match_angle_per_turn: float = Field(0.1, ge=0, le=10)
-    scan_match_angle_step_deg: float = Field(0.5, gt=0, le=180)  # the coarse search's rotation step before the LM
-    scan_match_min_gain: float = Field(0.2, ge=0, lt=1)  # a correction must lower the hits' robust cost by this fraction
 
-    _ordered = ordered(("logodds_min", "logodds_max"), ("free_threshold", "occupied_threshold"))
+    _ordered = ordered(("free_threshold", "occupied_threshold"))
 
     @model_validator(mode="after")
     def _bounded_grid(self):

@@ -26,6 +26,7 @@ from pydantic import BaseModel, Field, ValidationError
 from .documents import MAX_NESTING, DocumentRefused, TooDeep, load_yaml, read_document_text, too_deep, yaml_problem
 from ..errors import ConfigError
 from .base import Section
+from .retired import RETIRED, drop_retired
 from .estimation import (  # noqa: F401 - re-exported: callers import every section from here
     LineSettings,
     CircleSettings,
@@ -178,6 +179,9 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
             # not a name any setting could have: the file is likely not a settings file at
             # all (say /etc/shadow), and its keys are its contents: never echo them
             return f"{source}: has a key that is not a setting name (is it a settings file? see configs/default.yaml)"
+        if loc in RETIRED:  # named by an override or a caller's dict (files and logs drop them)
+            fixed, home = RETIRED[loc]
+            return f"{source}: '{loc}' is no longer a setting: fixed at {fixed!r} ({home.split(':')[1]} in {home.split(':')[0]})"
         return f"{source}: unknown setting '{loc}'" + _suggest_key(parts)
     if first["type"] == "section_rule":  # a cross-field rule: spell every key in full
         ctx, prefix = first["ctx"], "".join(f"{p}." for p in parts)
@@ -231,7 +235,7 @@ def load_settings(
             raise ConfigError(f"config file {path} is not valid YAML: {yaml_problem(err)}") from None
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: top level must be a mapping")
-        data = merge_nested(data, loaded)
+        data = merge_nested(data, drop_retired(loaded, str(path)))
     if isinstance(overrides, dict):
         data = merge_nested(data, overrides)
     elif overrides:

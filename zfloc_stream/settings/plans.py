@@ -9,8 +9,6 @@ from .base import Section
 
 class FloorplanSettings(Section):
     neighbour_distance: float = Field(6.0, gt=0, le=1000)  # m, lines closer than this are spatial neighbours (3L pruning)
-    wall_sample_spacing: float = Field(0.2, gt=0, le=10)  # m, floorplan wall pixels used by Cv are subsampled to this (a ratio: 0.2 m is plenty, 16x cheaper than 0.05)
-    line_point_spacing: float = Field(0.025, gt=0, le=10)  # m, wall-face pixels are subsampled to this before line extraction
     image_wall_threshold: float = Field(0.5, ge=0, le=1)  # plain images: occupancy (255 - v) / 255 above this is wall
     max_triplets: int = Field(2_000_000, ge=1, le=1_000_000_000)  # 3L table rows (~80 B each while built); a cluttered map past this keeps each line's nearest neighbours only, for its 3L and 2L tables (real maps: <= 0.5 M)
     # Memory and load-time budget of one plan: the cells the estimator keeps. A plan with

@@ -44,6 +44,7 @@ import yaml
 from mcap.summary import Summary
 
 from ...settings.loading import Settings, settings_from_dict
+from ...settings.retired import drop_retired
 from ...errors import FrameError, SessionLogError, ZflocError
 from ...estimate import Estimate
 from ...frames import CameraFrame, LaserFrame
@@ -148,7 +149,9 @@ class Session:
         if not isinstance(data, dict):
             raise SessionLogError(f"{self.path}: {what} are not a mapping")
         try:
-            return settings_from_dict(as_recorded(data), source=f"{self.path} ({what})")
+            # retired keys (now constants) dropped, with a warning where the log's value differs
+            kept = drop_retired(as_recorded(data), f"{self.path} ({what})", logged=True)
+            return settings_from_dict(kept, source=f"{self.path} ({what})")
         except ZflocError as err:
             raise SessionLogError(str(err)) from None
 
