@@ -31,7 +31,6 @@ class GibsonSettings(Section):
     focal_fraction: float = Field(0.375, gt=0, le=10)  # fx / image width (F3Loc's F_W): ~106 deg horizontal fov
     camera_height: float = Field(1.0, gt=0, le=10)  # m above the floor (assumed)
     wall_height: float = Field(2.6, gt=0, le=20)  # m, floor to ceiling (assumed)
-    map_resolution: float = Field(0.01, ge=0.001, le=1)  # m per map.png pixel
     split: str = Field("test", min_length=1)  # split.yaml entry used when a spec names none
 
     _ordered = ordered(("camera_height", "wall_height"))

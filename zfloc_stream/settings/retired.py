@@ -18,6 +18,8 @@ from __future__ import annotations
 import warnings
 
 RETIRED: dict[str, tuple[object, str]] = {
+    # plans/raster_files.py: read by nothing while it was a setting (Gibson maps are 1 cm/px)
+    "datasets.gibson.map_resolution": (0.01, "zfloc_stream.plans.raster_files:GIBSON_RESOLUTION"),
     # plans/floorplan.py
     "floorplan.wall_sample_spacing": (0.2, "zfloc_stream.plans.floorplan:WALL_SAMPLE_SPACING"),
     "floorplan.line_point_spacing": (0.025, "zfloc_stream.plans.floorplan:LINE_POINT_SPACING"),
