@@ -150,8 +150,8 @@ def test_line_only_dxf_fast_reader_equals_ezdxf(tmp_path, monkeypatch):
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from fuzz_inputs import write_dxf
-    from plan_bombs import dxf_pieces
+    from benchmarks.inputs.hostile_plans import write_dxf
+    from benchmarks.inputs.plan_bombs import dxf_pieces
 
     from zfloc_stream.plans import readers as plan_readers
 

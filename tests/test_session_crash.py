@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from session_helpers import camera_frames
+from benchmarks.inputs.session_frames import camera_frames
 
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.io.session import read_session
@@ -25,7 +25,8 @@ CHILD = textwrap.dedent(
     """
     import sys, time
     sys.path.insert(0, {tests!r})
-    from session_helpers import camera_frames, fake_estimate
+    from benchmarks.inputs.session_frames import camera_frames
+    from session_helpers import fake_estimate
     from zfloc_stream.settings.loading import load_settings
     from zfloc_stream.io.session import SessionWriter
 
