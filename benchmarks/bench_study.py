@@ -4,7 +4,7 @@
     python -m benchmarks.bench_study [--dataset sim:rooms,apartment] [--length 20]
         [--chunks 4] [--seeds 2] [--workers 0,1,2]
 
---quick: in-process only, one seed, one chunk of 5 frames.
+--quick: in-process only, one seed, one chunk of 10 frames.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def main(argv=None) -> int:
     bench.parser.add_argument("--workers", default="0,1,2", help="comma-separated worker counts (0 = in-process)")
     args = bench.parse(argv)
     if args.quick:
-        args.dataset, args.length, args.chunks, args.seeds, args.workers = "sim:rooms", 5, 1, 1, "0"
+        args.dataset, args.length, args.chunks, args.seeds, args.workers = "sim:rooms", 10, 1, 1, "0"
     overrides = {"study": {"max_chunks_per_sequence": args.chunks}}
     reference = None
     table = bench.table(["workers", "chunks", ("wall_s", "wall s"), ("chunks_per_s", "chunks/s"),
