@@ -102,7 +102,7 @@ def test_laser_session_flips(tmp_path):
             assert str(path) in str(err)
 
 
-# --- issue 44 families: valid-but-odd and hostile sessions (tests/session_hostile.py) ----------
+# --- issue 44 families: valid-but-odd and hostile sessions (benchmarks/inputs/hostile_sessions.py) --
 def _read_hostile(path, salvage: bool) -> int:
     session = read_session(path, salvage=salvage)
     n = sum(1 for _ in session.records())
