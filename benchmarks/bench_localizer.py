@@ -1,13 +1,14 @@
 """Per-push time of the streaming localizer (fusion-only frames and RANSAC frames apart)
 and the process's resident memory as the session grows (it must stay flat).
 
-    python benchmarks/bench_localizer.py                      # apartment, 10,000 frames
-    python benchmarks/bench_localizer.py --frames 2000 --scene office
+    python -m benchmarks.bench_localizer                      # apartment, 10,000 frames
+    python -m benchmarks.bench_localizer --frames 2000 --scene office
+
+--quick: 60 frames (a few rounds).
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -18,14 +19,15 @@ from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.simulator import SimSettings, simulate
 
+from benchmarks.harness import Benchmark
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", default="apartment")
-    ap.add_argument("--frames", type=int, default=10_000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--set", action="append", default=[])
-    args = ap.parse_args()
+
+def main(argv=None) -> int:
+    bench = Benchmark("localizer", __doc__, seed=0, frames=10_000, settings=True)
+    bench.parser.add_argument("--scene", default="apartment")
+    args = bench.parse(argv)
+    if args.quick:
+        args.frames = 60
     settings = load_settings(overrides=args.set)
     scene = build_scene(args.scene, seed=args.seed)
     sequence = simulate(scene, SimSettings(), seed=args.seed, n_frames=args.frames)
@@ -34,6 +36,7 @@ def main() -> None:
     fusion_ms, round_ms = [], []
     checkpoints = {c for c in (100, 1_000, 5_000, 10_000, args.frames) if c <= args.frames}
     memory = {}
+    growth = bench.table(["frame", ("rss_mib", "RSS MiB"), ("bev_mib", "BEV MiB"), "status"], title="memory")
     for k, frame in enumerate(sequence, start=1):  # frames are rendered lazily, outside the timer
         t0 = time.perf_counter()
         est = localizer.push(frame)
@@ -41,15 +44,17 @@ def main() -> None:
         (round_ms if "model_estimation" in est.timings else fusion_ms).append(ms)
         if k in checkpoints:
             memory[k] = process.memory_info().rss / 2**20
-            print(f"frame {k:6d}: RSS {memory[k]:7.1f} MiB, BEV {localizer.bev.memory_bytes() / 2**20:5.1f} MiB, status {est.status}")
-    for name, values in (("fusion-only push", fusion_ms), ("RANSAC-round push", round_ms)):
-        v = np.array(values)
-        if len(v):
-            print(f"{name:18s}: n={len(v):5d}  median {np.median(v):7.1f} ms  p90 {np.percentile(v, 90):7.1f} ms  max {v.max():7.1f} ms")
+            growth.add(frame=k, rss_mib=memory[k], bev_mib=localizer.bev.memory_bytes() / 2**20, status=est.status)
     if len(memory) > 1:
         first, last = min(k for k in memory if k >= 1_000) if any(k >= 1_000 for k in memory) else min(memory), max(memory)
-        print(f"RSS growth from frame {first} to {last}: {memory[last] - memory[first]:+.1f} MiB")
+        bench.note(f"RSS growth from frame {first} to {last}: {memory[last] - memory[first]:+.1f} MiB")
+    push = bench.table(["push", "n", ("median_ms", "median ms"), ("p90_ms", "p90 ms"), ("max_ms", "max ms")], title="push time")
+    for name, values in (("fusion-only", fusion_ms), ("RANSAC round", round_ms)):
+        v = np.array(values)
+        if len(v):
+            push.add(push=name, n=len(v), median_ms=float(np.median(v)), p90_ms=float(np.percentile(v, 90)), max_ms=float(v.max()))
+    return bench.done()
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

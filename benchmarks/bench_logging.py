@@ -1,8 +1,8 @@
 """Session logging cost at 640x480: time per frame against the localizer's own time, and
 bytes per frame (depth stored losslessly as 32FC1).
 
-    .venv/bin/python benchmarks/bench_logging.py                 # 40 frames, apartment, zstd
-    .venv/bin/python benchmarks/bench_logging.py --frames 100 --compression zstd lz4 none
+    python -m benchmarks.bench_logging                 # 40 frames, apartment, zstd
+    python -m benchmarks.bench_logging --frames 100 --compression zstd lz4 none
 
 Frames are simulated (zfloc_stream.sim, 640x480, depth noise 1%) and pre-rendered, then
 run through a fresh localizer: once bare, then with every frame and estimate logged, for
@@ -11,12 +11,11 @@ inline). Reported: the time the caller spends in the writer (wall and its thread
 the goal is below 20% of the frame's processing time), the process CPU per frame with and
 without logging (all threads, so the worker's compression is counted), bytes per frame.
 The file is read back and every depth image compared bit for bit. On a shared machine
-wall times include waiting for a core.
+wall times include waiting for a core. --quick: 6 frames of 160x120, zstd in the background.
 """
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
@@ -27,6 +26,8 @@ from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.io.session import SessionWriter, read_session
 from zfloc_stream.sim import SimSettings, build_scene, simulate
+
+from benchmarks.harness import Benchmark
 
 
 def run(frames, plan, settings: Settings, path: Path | None):
@@ -61,24 +62,30 @@ def run(frames, plan, settings: Settings, path: Path | None):
     return np.array(push), np.array(log_wall), np.array(log_cpu), total_cpu
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=40)
-    ap.add_argument("--scene", default="apartment")
-    ap.add_argument("--compression", nargs="+", default=["zstd"], choices=["zstd", "lz4", "none"])
-    ap.add_argument("--background", nargs="+", default=["true", "false"], choices=["true", "false"],
-                    help="writer modes to measure (logging.background)")
-    args = ap.parse_args()
+def main(argv=None) -> int:
+    bench = Benchmark("logging", __doc__, frames=40)
+    bench.parser.add_argument("--scene", default="apartment")
+    bench.parser.add_argument("--compression", nargs="+", default=["zstd"], choices=["zstd", "lz4", "none"])
+    bench.parser.add_argument("--background", nargs="+", default=["true", "false"], choices=["true", "false"],
+                              help="writer modes to measure (logging.background)")
+    args = bench.parse(argv)
+    width, height = 640, 480
+    if args.quick:
+        args.frames, args.background, width, height = 6, ["true"], 160, 120
 
     scene = build_scene(args.scene, seed=0)
     t0 = time.perf_counter()
-    frames = list(simulate(scene, SimSettings(width=640, height=480), seed=0, n_frames=args.frames).frames)
-    print(f"simulated {len(frames)} frames of 640x480 in {time.perf_counter() - t0:.1f} s ({args.scene})")
+    frames = list(simulate(scene, SimSettings(width=width, height=height), seed=0, n_frames=args.frames).frames)
+    bench.note(f"simulated {len(frames)} frames of {width}x{height} in {time.perf_counter() - t0:.1f} s ({args.scene})")
     raw = frames[0].depth.nbytes + (0 if frames[0].labels is None else frames[0].labels.nbytes)
 
     push_bare, _, _, cpu_bare = run(frames, scene.floorplan, Settings(), None)
-    print(f"localizer alone: mean {push_bare.mean() * 1e3:.1f} ms/frame wall (median {np.median(push_bare) * 1e3:.1f} ms), "
-          f"process CPU {cpu_bare * 1e3:.1f} ms/frame")
+    bench.note(f"localizer alone: mean {push_bare.mean() * 1e3:.1f} ms/frame wall (median {np.median(push_bare) * 1e3:.1f} ms), "
+               f"process CPU {cpu_bare * 1e3:.1f} ms/frame")
+    table = bench.table(["compression", "background", ("log_wall_ms", "caller's logging ms/frame"), ("log_cpu_ms", "its CPU ms"),
+                         ("log_wall_p95_ms", "p95 wall ms"), ("share_pct", "% of push (goal < 20)"),
+                         ("process_cpu_ms", "process CPU ms/frame"), ("logging_cpu_ms", "logging CPU ms/frame, all threads"),
+                         ("mb_per_frame", "MB/frame"), ("ratio", "raw/file"), ("lossless", "depth lossless")])
     with tempfile.TemporaryDirectory() as tmp:
         for comp in args.compression:
             for background in args.background:
@@ -90,22 +97,13 @@ def main() -> None:
                 lossless = len(back) == len(frames) and all(
                     np.array_equal(a.depth, b.depth, equal_nan=True) for a, b in zip(back, frames, strict=True)
                 )
-                tag = f"[{comp}, background={background}]"
-                print(
-                    f"{tag} caller's logging time: mean {wall.mean() * 1e3:.2f} ms/frame wall (CPU {cpu.mean() * 1e3:.2f} ms, "
-                    f"p95 wall {np.quantile(wall, 0.95) * 1e3:.2f} ms) = {wall.sum() / push.sum() * 100:.1f}% of the "
-                    f"localizer's {push.mean() * 1e3:.1f} ms/frame (goal < 20%)"
-                )
-                print(
-                    f"{tag} process CPU {total * 1e3:.1f} ms/frame vs {cpu_bare * 1e3:.1f} without logging: "
-                    f"logging costs {(total - cpu_bare) * 1e3:.1f} ms/frame of CPU on all threads "
-                    f"({(total - cpu_bare) / cpu_bare * 100:.0f}% of the localizer's CPU)"
-                )
-                print(
-                    f"{tag} {size / len(frames) / 1e6:.3f} MB/frame ({size / 1e6:.1f} MB file; raw depth+labels "
-                    f"{raw / 1e6:.3f} MB/frame, ratio {raw * len(frames) / size:.2f}); depth lossless: {lossless}"
-                )
+                table.add(compression=comp, background=background == "true", log_wall_ms=wall.mean() * 1e3, log_cpu_ms=cpu.mean() * 1e3,
+                          log_wall_p95_ms=np.quantile(wall, 0.95) * 1e3, share_pct=wall.sum() / push.sum() * 100,
+                          push_ms=push.mean() * 1e3, process_cpu_ms=total * 1e3, bare_cpu_ms=cpu_bare * 1e3,
+                          logging_cpu_ms=(total - cpu_bare) * 1e3, mb_per_frame=size / len(frames) / 1e6, file_mb=size / 1e6,
+                          raw_mb_per_frame=raw / 1e6, ratio=raw * len(frames) / size, lossless=lossless)
+    return bench.done()
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -9,12 +9,12 @@ PNG). Timed: Floorplan.load of each (primitives, distance field, line neighbours
 everything a floorplan computes on construction), then the RANSAC per-plan tables
 (correspondences.floorplan_matches) on first use and again (cached with the plan).
 
-    python benchmarks/bench_plan_load.py                 # goal: DXF <= 5 s, raster <= 3 s
-    python benchmarks/bench_plan_load.py --keep plan/    # keep the generated files
-    python benchmarks/bench_plan_load.py --set floorplan.max_triplets=500000
-    python benchmarks/bench_plan_load.py --large 300 --log fhw   # issue 43: a 300 x 300 m raster
-    python benchmarks/bench_plan_load.py --large 300 --vector    # the same floor as a DXF
-    python benchmarks/bench_plan_load.py --honest                # issue 44: large honest drawings
+    python -m benchmarks.bench_plan_load                 # goal: DXF <= 5 s, raster <= 3 s
+    python -m benchmarks.bench_plan_load --keep plan/    # keep the generated files
+    python -m benchmarks.bench_plan_load --set floorplan.max_triplets=500000
+    python -m benchmarks.bench_plan_load --large 300 --log fhw   # issue 43: a 300 x 300 m raster
+    python -m benchmarks.bench_plan_load --large 300 --vector    # the same floor as a DXF
+    python -m benchmarks.bench_plan_load --honest                # issue 44: large honest drawings
 
 --large S: a S x S m floor of the same kind drawn at 0.05 m (a raster of (S/0.05)^2 cells),
 loaded with the default settings as a ROS map (pooled to floorplan.max_cells when larger):
@@ -24,13 +24,15 @@ instead the whole-log maps of the shared Carmen logs (../shared/data/carmen/) ti
 it, L's own map once in its corner (large_plan), and L's first --frames scans (drifting
 odometry, fixed scale) are played on the whole plan: `tracking` frames and their error.
 
---honest: issue 44's large but honest drawings (tests/plan_bombs.py, fixed seeds): a DXF of
+--honest: issue 44's large but honest drawings (benchmarks/inputs/plan_bombs.py, fixed seeds): a DXF of
 100,000 short LINEs scattered in a 50 m square (scatter), a DXF of 100,000 LINE pieces of
 walls on a 2 m grid in a 50 m square (pieces), one SVG path of 200,000 segments (path200k).
 Each is loaded (load_floorplan, default settings) in a fresh process, so its peak RSS is
 its own: wall and CPU seconds of the load, then of the estimator's RANSAC tables on first
 use (floorplan_matches), and the process's peak RSS. Goal: load <= 10 s, peak <= 2 GiB.
 --families picks some, --size scales their counts (--size 0.1: 10,000 lines).
+
+--quick: the default measurement on a 40 x 34 m floor (two bands of rooms).
 """
 
 from __future__ import annotations
@@ -54,6 +56,10 @@ from zfloc_stream.plans.floorplan import Floorplan, write_ros_map
 from zfloc_stream.plans.loading import load_floorplan
 from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.plans.vector import load_vector_floorplan
+
+from benchmarks.harness import ROOT, Benchmark
+from benchmarks.inputs import plan_bombs
+from benchmarks.shared_data import SHARED_DATA
 
 WIDTH, HEIGHT = 248.0, 240.0  # m
 BAND = 17.0  # m: rooms 6.5 m deep either side of a 4 m corridor
@@ -136,7 +142,7 @@ def large_plan(size: float, seed: int, out: Path, settings, log: str | None, vec
         from zfloc_stream.io.datasets.carmen import load_log
         from zfloc_stream.plans.map_from_log import map_from_log
 
-        data = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+        data = SHARED_DATA / "carmen"
         path = data / f"{log}-corrected.log.gz"
         maps = {name: map_from_log(load_log(data / f"{name}-corrected.log.gz", settings), [], settings, resolution=res).occupied
                 for name in ("intel", "aces", "belgioioso", "fhw", "orebro")}
@@ -162,7 +168,7 @@ def large_plan(size: float, seed: int, out: Path, settings, log: str | None, vec
     return write_ros_map(out, "large", img, res, origin), path  # the raster is written, not built
 
 
-def large_main(args, settings, out: Path) -> int:
+def large_main(bench, args, settings, out: Path) -> int:
     import resource
 
     from zfloc_stream.estimation.correlative import _near_wall_mask
@@ -175,13 +181,13 @@ def large_main(args, settings, out: Path) -> int:
                                  _near_wall_mask(plan, settings.estimator.correlative.cell, settings.estimator.correlative.tolerance)))
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
     h, w = plan.shape
-    print(f"plan: {args.large:.0f} x {args.large:.0f} m {'DXF' if args.vector else 'raster'} at 0.05 m -> kept {w} x {h} cells at {plan.resolution:g} m "
-          f"({len(plan.lines)} lines, {len(plan.circles)} circles)")
-    print("| step | wall s | CPU s |\n|---|---|---|")
-    print(f"| load_floorplan (image or drawing, pooling, field, primitives) | {t_load[0]:.2f} | {t_load[1]:.2f} |")
-    print(f"| estimator tables (scorer, RANSAC, correlative mask) | {t_tables[0]:.2f} | {t_tables[1]:.2f} |")
-    print(f"| total | {t_load[0] + t_tables[0]:.2f} | {t_load[1] + t_tables[1]:.2f} |")
-    print(f"peak RSS of the process: {peak:.0f} MiB ({before:.0f} MiB before the load: imports, kernels, the generated image)")
+    bench.note(f"plan: {args.large:.0f} x {args.large:.0f} m {'DXF' if args.vector else 'raster'} at 0.05 m -> kept {w} x {h} cells at {plan.resolution:g} m "
+               f"({len(plan.lines)} lines, {len(plan.circles)} circles)")
+    table = bench.table(["step", ("wall_s", "wall s"), ("cpu_s", "CPU s")], title="large plan")
+    table.add(step="load_floorplan (image or drawing, pooling, field, primitives)", wall_s=t_load[0], cpu_s=t_load[1])
+    table.add(step="estimator tables (scorer, RANSAC, correlative mask)", wall_s=t_tables[0], cpu_s=t_tables[1])
+    table.add(step="total", wall_s=t_load[0] + t_tables[0], cpu_s=t_load[1] + t_tables[1], peak_rss_mib=peak, rss_before_mib=before)
+    bench.note(f"peak RSS of the process: {peak:.0f} MiB ({before:.0f} MiB before the load: imports, kernels, the generated image)")
     if log_path is None:
         return 0
     from zfloc_stream.io.datasets.carmen import carmen_sequence
@@ -197,9 +203,12 @@ def large_main(args, settings, out: Path) -> int:
     errors = position_errors([e.pose for e in estimates], np.array([f.ground_truth for f in frames]))
     tracking = np.array([e.status == "tracking" for e in estimates])
     first = int(np.argmax(tracking)) if tracking.any() else None
-    print(f"{args.log}: {len(frames)} scans on the {args.large:.0f} m plan: first `tracking` at frame {first}, "
-          f"{tracking.sum()} tracking frames, {np.mean(errors[tracking] < 1.0) * 100 if tracking.any() else 0:.1f}% of them within 1 m, "
-          f"last 10 frames within 1 m: {bool(np.all(errors[-10:] < 1.0))}, peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10:.0f} MiB")
+    bench.table(["log", "scans", ("first_tracking", "first tracking frame"), ("tracking", "tracking frames"),
+                 ("within_1m_pct", "% of them within 1 m"), ("last_10_within_1m", "last 10 within 1 m"), ("peak_rss_mib", "peak RSS MiB")],
+                title=f"the log's scans on the {args.large:.0f} m plan").add(
+        log=args.log, scans=len(frames), first_tracking=first, tracking=int(tracking.sum()),
+        within_1m_pct=float(np.mean(errors[tracking] < 1.0) * 100) if tracking.any() else 0.0, last_10_within_1m=bool(np.all(errors[-10:] < 1.0)),
+        peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10)
     return 0
 
 
@@ -226,46 +235,43 @@ def honest_one(path: Path, scale: float | None, tables: bool) -> dict:
     return out
 
 
-def honest_main(args, out: Path) -> int:
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import plan_bombs
-
-    print("| family | drawing | lines, circles kept | load wall s | load CPU s | peak RSS MiB (load) | RANSAC tables wall s | peak RSS MiB |")
-    print("|---|---|---|---|---|---|---|---|")
+def honest_main(bench, args, out: Path) -> int:
+    table = bench.table(["family", "drawing", ("kept", "lines, circles kept"), ("load_wall_s", "load wall s"), ("load_cpu_s", "load CPU s"),
+                         ("peak_load_mib", "peak RSS MiB (load)"), ("tables_wall_s", "RANSAC tables wall s"), ("peak_mib", "peak RSS MiB"), "outcome"],
+                        title="honest drawings")
     worst = 0.0
     for name in args.families.split(","):
         generator, count, suffix, scale = HONEST[name]
         n = max(int(count * args.size), 10)
         path = getattr(plan_bombs, generator)(out / f"{name}{suffix}", n, **({"seed": args.seed} if suffix == ".dxf" else {}))
-        cmd = [sys.executable, __file__, "--honest-one", str(path), "--scale", str(scale or 0)] + (["--no-tables"] if args.no_tables else [])
+        cmd = [sys.executable, "-m", "benchmarks.bench_plan_load", "--honest-one", str(path), "--scale", str(scale or 0)] + (["--no-tables"] if args.no_tables else [])
+        drawing = f"{n:,} {'segments' if suffix == '.svg' else 'LINEs'}"
         try:
-            run = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout, env=dict(os.environ))
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout, env=dict(os.environ), cwd=ROOT)
         except subprocess.TimeoutExpired:
-            print(f"| {name} | {n:,} {'segments' if suffix == '.svg' else 'LINEs'} | | > {args.timeout:.0f} (killed) | | | | |")
+            table.add(family=name, drawing=drawing, count=n, outcome=f"killed after {args.timeout:.0f} s")
             worst = float("inf")
             continue
         if run.returncode != 0:
-            print(f"| {name} | failed: {run.stderr.strip().splitlines()[-1:]} |")
+            table.add(family=name, drawing=drawing, count=n, outcome=f"failed: {run.stderr.strip().splitlines()[-1:]}")
             worst = float("inf")
             continue
         r = json.loads(run.stdout.strip().splitlines()[-1])
         worst = max(worst, r["load_wall"])
-        tables = f"{r['tables_wall']:.2f} | {r['peak']:.0f}" if "tables_wall" in r else "- | -"
-        print(f"| {name} | {n:,} {'segments' if suffix == '.svg' else 'LINEs'} | {r['lines']:,}, {r['circles']} ({r['neighbour_pairs']:,} neighbour pairs) | "
-              f"{r['load_wall']:.2f} | {r['load_cpu']:.2f} | {r['peak_load']:.0f} | {tables} |")
+        table.add(family=name, drawing=drawing, count=n, kept=f"{r['lines']:,}, {r['circles']} ({r['neighbour_pairs']:,} neighbour pairs)",
+                  load_wall_s=r["load_wall"], load_cpu_s=r["load_cpu"], peak_load_mib=r["peak_load"], tables_wall_s=r.get("tables_wall"),
+                  peak_mib=r.get("peak"), outcome="loaded", lines=r["lines"], circles=r["circles"], neighbour_pairs=r["neighbour_pairs"])
     return 0 if worst <= 10.0 else 1
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seed", type=int, default=0)
+    global WIDTH, HEIGHT
+    bench = Benchmark("plan_load", __doc__, seed=0, frames=150, settings=True)  # --frames: with --log, scans played
+    parser = bench.parser
     parser.add_argument("--keep", type=Path, help="write the plan files here (default: a temporary folder)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="settings override, e.g. floorplan.max_triplets=500000")
     parser.add_argument("--large", type=float, metavar="S", help="instead: a S x S m raster at 0.05 m, default settings (issue 43)")
     parser.add_argument("--log", help="with --large: a Carmen log whose map is placed in the plan and whose scans are played on it")
     parser.add_argument("--vector", action="store_true", help="with --large (no --log): the floor as a DXF drawing, not a raster")
-    parser.add_argument("--frames", type=int, default=150, help="with --log: scans played")
     parser.add_argument("--honest", action="store_true", help="instead: issue 44's large honest drawings, each in a fresh process")
     parser.add_argument("--families", default=",".join(HONEST), help="with --honest: which (comma-separated)")
     parser.add_argument("--size", type=float, default=1.0, help="with --honest: counts times this")
@@ -273,17 +279,23 @@ def main(argv=None) -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="with --honest: seconds per family before it is killed")
     parser.add_argument("--honest-one", type=Path, help=argparse.SUPPRESS)  # the child process of --honest
     parser.add_argument("--scale", type=float, default=0.0, help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+    args = bench.parse(argv)
     if args.honest_one:
         print(json.dumps(honest_one(args.honest_one, args.scale or None, not args.no_tables)))
         return 0
+    if args.quick:
+        WIDTH, HEIGHT = 40.0, 34.0
     with tempfile.TemporaryDirectory() as tmp:
         out = args.keep if args.keep is not None else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         if args.large:
-            return large_main(args, load_settings(overrides=args.set), out)
+            code = large_main(bench, args, load_settings(overrides=args.set), out)
+            bench.done()
+            return code
         if args.honest:
-            return honest_main(args, out)
+            code = honest_main(bench, args, out)
+            bench.done()
+            return code
         segments, pillars = building_segments(args.seed)
         dxf = write_dxf(segments, pillars, out / "building.dxf")
         settings = load_settings(overrides=args.set)
@@ -302,17 +314,18 @@ def main(argv=None) -> int:
         raster, t_raster = timed(lambda: Floorplan.load(raster_yaml, settings=settings))
         _, t_raster_tables = timed(lambda: floorplan_matches(raster, settings.estimator.solvers))
         h, w = raster.shape
-        print(f"plan: {WIDTH:.0f} x {HEIGHT:.0f} m, {len(segments)} LINE segments + {len(pillars)} pillars -> "
-              f"{len(plan.lines)} lines, {len(plan.circles)} circles")
-        print(f"raster: {w} x {h} cells at {raster.resolution} m -> {len(raster.lines)} lines, {len(raster.circles)} circles")
-        print("| load | wall s | CPU s | goal (s) |\n|---|---|---|---|")
-        print(f"| DXF plan (load_floorplan) | {t_dxf[0]:.2f} | {t_dxf[1]:.2f} | <= 5 |")
-        print(f"| raster plan (Floorplan.load) | {t_raster[0]:.2f} | {t_raster[1]:.2f} | <= 3 |")
-        print(f"| RANSAC tables, DXF plan (first use / cached) | {t_dxf_tables[0]:.2f} / {t_dxf_cached[0]:.4f} | {t_dxf_tables[1]:.2f} | |")
-        print(f"| RANSAC tables, raster plan (first use) | {t_raster_tables[0]:.2f} | {t_raster_tables[1]:.2f} | |")
-        print(f"| once per process: a 40 x 20 m raster's load (imports, kernels) | {t_first[0]:.2f} | {t_first[1]:.2f} | |")
-    return 0
+        bench.note(f"plan: {WIDTH:.0f} x {HEIGHT:.0f} m, {len(segments)} LINE segments + {len(pillars)} pillars -> "
+                   f"{len(plan.lines)} lines, {len(plan.circles)} circles")
+        bench.note(f"raster: {w} x {h} cells at {raster.resolution} m -> {len(raster.lines)} lines, {len(raster.circles)} circles")
+        table = bench.table(["load", ("wall_s", "wall s"), ("cpu_s", "CPU s"), ("goal_s", "goal (s)")], title="plan load")
+        table.add(load="DXF plan (load_floorplan)", wall_s=t_dxf[0], cpu_s=t_dxf[1], goal_s=5.0)
+        table.add(load="raster plan (Floorplan.load)", wall_s=t_raster[0], cpu_s=t_raster[1], goal_s=3.0)
+        table.add(load="RANSAC tables, DXF plan (first use)", wall_s=t_dxf_tables[0], cpu_s=t_dxf_tables[1])
+        table.add(load="RANSAC tables, DXF plan (cached)", wall_s=t_dxf_cached[0], cpu_s=t_dxf_cached[1])
+        table.add(load="RANSAC tables, raster plan (first use)", wall_s=t_raster_tables[0], cpu_s=t_raster_tables[1])
+        table.add(load="once per process: a 40 x 20 m raster's load (imports, kernels)", wall_s=t_first[0], cpu_s=t_first[1])
+    return bench.done()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

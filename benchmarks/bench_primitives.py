@@ -1,12 +1,14 @@
 """Speed of line/circle extraction and floorplan construction (numbers, not asserts).
 
-    .venv/bin/python benchmarks/bench_primitives.py
+    python -m benchmarks.bench_primitives
+
+Times are the best of --repeat runs in process CPU time. --quick: the smallest room grid,
+a 10 x 10 m office, 10,000 distance queries, no Intel map.
 """
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -16,8 +18,10 @@ from zfloc_stream.primitives.extract import extract_circles, extract_lines
 from zfloc_stream.sim.raycast2d import cast_rays
 from zfloc_stream.runtime.rng import make_rng
 
-ROOT = Path(__file__).resolve().parents[1]
-INTEL = ROOT.parent / "shared" / "data" / "sessions" / "intel-camera-30" / "map.yaml"
+from benchmarks.harness import Benchmark
+from benchmarks.shared_data import SHARED_DATA
+
+INTEL = SHARED_DATA / "sessions" / "intel-camera-30" / "map.yaml"
 
 
 def bev_like_points(n_rooms_x: int, n_rooms_y: int, rng, spacing=0.05, noise=0.015, outliers=0.05, pillars=True):
@@ -77,29 +81,38 @@ def office_grid(size_m=50.0, res=0.05, room=5.0, thickness=0.15, door=1.0):
     return occ
 
 
-def main():
+def main(argv=None) -> int:
+    bench = Benchmark("primitives", __doc__, repeat=3)
+    args = bench.parse(argv)
+    grids, office_m, queries, intel = ((2, 3), (4, 3), (5, 4)), 50.0, 1_000_000, INTEL.is_file()
+    if args.quick:
+        grids, office_m, queries, intel, args.repeat = ((2, 3),), 10.0, 10_000, False, 1
     rng = np.random.default_rng(0)
     s = Settings()
-    for nx, ny in ((2, 3), (4, 3), (5, 4)):
+    table = bench.table(["case", "size", ("cpu_ms", "CPU ms"), "result"])
+    for nx, ny in grids:
         pts = bev_like_points(nx, ny, rng)
-        dt, lines = timed(lambda: extract_lines(pts, s.primitives.lines, make_rng(0)))
-        dc, circles = timed(lambda: extract_circles(pts, s.primitives.circles, make_rng(0)))
-        print(f"BEV-like {len(pts):6d} points: extract_lines {dt * 1e3:7.1f} ms ({len(lines)} lines), "
-              f"extract_circles {dc * 1e3:7.1f} ms ({len(circles)} circles)")
-    occ = office_grid()
+        dt, lines = timed(lambda: extract_lines(pts, s.primitives.lines, make_rng(0)), args.repeat)
+        dc, circles = timed(lambda: extract_circles(pts, s.primitives.circles, make_rng(0)), args.repeat)
+        table.add(case="extract_lines", size=f"{len(pts)} BEV-like points", cpu_ms=dt * 1e3, result=f"{len(lines)} lines", points=len(pts))
+        table.add(case="extract_circles", size=f"{len(pts)} BEV-like points", cpu_ms=dc * 1e3, result=f"{len(circles)} circles", points=len(pts))
+    occ = office_grid(office_m)
     dt, fp = timed(lambda: Floorplan.from_occupancy(occ, 0.05, (0, 0)), repeat=1)
-    print(f"office 50x50 m ({occ.shape[1]}x{occ.shape[0]} cells, {occ.sum()} wall cells, {len(fp.face_points)} face cells): "
-          f"construction {dt:.2f} s, {len(fp.lines)} lines, {len(fp.circles)} circles")
-    if INTEL.is_file():
+    table.add(case="Floorplan.from_occupancy", size=f"office {office_m:g}x{office_m:g} m ({occ.shape[1]}x{occ.shape[0]} cells, "
+              f"{occ.sum()} wall cells, {len(fp.face_points)} face cells)", cpu_ms=dt * 1e3, result=f"{len(fp.lines)} lines, {len(fp.circles)} circles")
+    if intel:
         dt, fp = timed(lambda: Floorplan.load(INTEL), repeat=1)
-        print(f"intel map ({fp.shape[1]}x{fp.shape[0]}): construction {dt:.2f} s, {len(fp.lines)} lines, {len(fp.circles)} circles")
-    q = rng.uniform(-5, 55, (1_000_000, 2))
-    dd, _ = timed(lambda: fp.distance(q))
-    print(f"Floorplan.distance: {dd * 1e3:.1f} ms per 1e6 points")
+        table.add(case="Floorplan.load", size=f"intel map ({fp.shape[1]}x{fp.shape[0]})", cpu_ms=dt * 1e3,
+                  result=f"{len(fp.lines)} lines, {len(fp.circles)} circles")
+    q = rng.uniform(-5, office_m + 5, (queries, 2))
+    dd, _ = timed(lambda: fp.distance(q), args.repeat)
+    table.add(case="Floorplan.distance", size=f"{queries:,} points", cpu_ms=dd * 1e3, result="")
+    pose = (2.3, 3.1, 0.3) if args.quick else (12.3, 17.1, 0.3)
     big = Floorplan.from_occupancy(np.pad(occ, ((0, 0), (0, 0))), 0.05, (0, 0))
-    dr, scan = timed(lambda: cast_rays(big, (12.3, 17.1, 0.3), 2 * np.pi, 10.0, 360), repeat=10)
-    print(f"cast_rays 360 beams x 10 m on {big.shape[1]}x{big.shape[0]}: {dr * 1e3:.2f} ms ({scan.hit_mask.sum()} hits)")
+    dr, scan = timed(lambda: cast_rays(big, pose, 2 * np.pi, 10.0, 360), repeat=max(args.repeat, 10 * (not args.quick)))
+    table.add(case="cast_rays", size=f"360 beams x 10 m on {big.shape[1]}x{big.shape[0]}", cpu_ms=dr * 1e3, result=f"{scan.hit_mask.sum()} hits")
+    return bench.done()
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -8,18 +8,19 @@ per fused frame (fusion + monitor: a push that neither starts nor applies a roun
 median and p95. Cases: built-in scenes (camera 160x120, laser), the shared real camera
 sessions (../shared/data/sessions/*/session.mcap against map.yaml beside it) at fixed,
 prior and free scale, and windows of a Carmen laser log localized against the map of the
-log without the window (as benchmarks/eval_real.py).
+log without the window (as benchmarks/evaluation/eval_real.py).
 
 Push latency: a 640x480 camera walk on a built-in scene, with labels and without (the
 geometric labeller labels each frame), median / p99 / max of the push wall time over all
 frames and max over the frames where a round starts or joins, inline vs pipelined (one
 worker thread; --process adds a worker process). Frames are rendered before timing.
 
-    python benchmarks/bench_round.py --quick        # a few minutes on 2 cores
-    python benchmarks/bench_round.py                # more scenes, frames and windows
-    python benchmarks/bench_round.py --defaults --rate 0      # the package defaults on real data
-    PYTHONPATH=../main python benchmarks/bench_round.py --defaults --rate 0   # another checkout's
-    python benchmarks/bench_round.py --defaults --rate 10 --frame-kinds       # join / start / plain frames apart
+    python -m benchmarks.bench_round --short        # a few minutes on 2 cores
+    python -m benchmarks.bench_round                # more scenes, frames and windows
+    python -m benchmarks.bench_round --quick        # a smoke run: one scene, a few frames
+    python -m benchmarks.bench_round --defaults --rate 0      # the package defaults on real data
+    PYTHONPATH=../main:. python benchmarks/bench_round.py --defaults --rate 0   # another checkout's package
+    python -m benchmarks.bench_round --defaults --rate 10 --frame-kinds       # join / start / plain frames apart
 
 --defaults (issue 25): push latency with the package defaults through the Python API on
 the shared camera sessions belgioioso-camera-50 and fhw-camera-50 (metric prior) and two
@@ -30,8 +31,6 @@ and commit, are in docs/performance.md (this script's earlier ones too).
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import time
 from collections import defaultdict
@@ -46,7 +45,8 @@ from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.io.session import read_session
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+from benchmarks.harness import Benchmark
+from benchmarks.shared_data import SHARED_DATA as SHARED
 STAGES = ("fusion", "primitives", "model_estimation", "scoring", "refinement", "tracking", "local_refinement", "round")
 
 
@@ -72,18 +72,19 @@ def stage_times(floorplan, frames, settings) -> dict[str, tuple[list, list]]:
     return out
 
 
-def print_stages(name: str, times: dict) -> None:
+def add_stages(table, name: str, times: dict) -> None:
+    """One row per stage of a case: median and p95 of wall and CPU ms."""
     n = len(times.get("round", ([], []))[0])
-    cells = []
     for stage in STAGES:
         wall, cpu = (np.array(v) * 1000 for v in times.get(stage, ([], [])))
         if len(wall):
-            cells.append(f"{stage} {np.median(wall):.1f}/{np.percentile(wall, 95):.1f} (cpu {np.nanmedian(cpu):.1f}/{np.nanpercentile(cpu, 95):.1f})")
-    print(f"{name:34s} rounds {n:3d} | " + " | ".join(cells), flush=True)
+            table.add(case=name, rounds=n, stage=stage, n=len(wall), wall_median_ms=float(np.median(wall)), wall_p95_ms=float(np.percentile(wall, 95)),
+                      cpu_median_ms=float(np.nanmedian(cpu)), cpu_p95_ms=float(np.nanpercentile(cpu, 95)))
 
 
-def scene_cases(quick: bool):
-    frames = 40 if quick else 100
+def scene_cases(size: str):
+    quick = size != "full"
+    frames = {"quick": 15, "short": 40, "full": 100}[size]
     for name in ("apartment",) if quick else ("apartment", "office", "hall"):
         scene = build_scene(name, seed=0)
         yield f"scene {name} camera", scene.floorplan, simulate(scene, SimSettings(), seed=0, n_frames=frames).frames, []
@@ -91,27 +92,29 @@ def scene_cases(quick: bool):
     yield "scene office laser", scene.floorplan, simulate_laser(scene, LaserSimSettings(), seed=1, n_frames=frames).frames, ["estimator.scale_mode=fixed"]
 
 
-def session_cases(quick: bool):
+def session_cases(size: str):
     sessions = sorted((SHARED / "sessions").glob("*/session.mcap"))
     if not sessions:
         print(f"(no shared sessions under {SHARED / 'sessions'}: skipped)")
-    for path in sessions[:2] if quick else sessions:
+    for path in {"quick": sessions[:1], "short": sessions[:2], "full": sessions}[size]:
         frames = list(read_session(path).frames())
-        for mode in ("fixed", "prior", "free"):
+        if size == "quick":
+            frames = frames[:15]
+        for mode in ("prior",) if size == "quick" else ("fixed", "prior", "free"):
             overrides = [f"estimator.scale_mode={mode}"]
             plan = Floorplan.load(path.parent / "map.yaml", settings=load_settings(overrides=overrides))
             yield f"{path.parent.name} {mode}", plan, frames, overrides
 
 
-def carmen_cases(quick: bool):
+def carmen_cases(size: str):
     log = SHARED / "carmen" / "intel-corrected.log.gz"
     if not log.exists():
         print(f"(no Carmen log {log}: skipped)")
         return
     overrides = ["estimator.scale_mode=fixed"]
     seq = carmen_sequence(log, load_settings(overrides=overrides))
-    n, length = len(seq.ground_truth), 50
-    for start in [n // 3] if quick else np.linspace(0, n - length, 3).astype(int).tolist():
+    n, length = len(seq.ground_truth), 15 if size == "quick" else 50
+    for start in [n // 3] if size != "full" else np.linspace(0, n - length, 3).astype(int).tolist():
         yield f"carmen intel [{start}, {start + length})", seq.floorplan_for(start, start + length), list(seq.frames(start, start + length)), overrides
 
 
@@ -186,15 +189,15 @@ def frame_kinds(walls: np.ndarray, estimates) -> dict[str, tuple]:
             for k, v in kinds.items() if v}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="fewer cases and frames")
+def main(argv=None) -> int:
+    bench = Benchmark("round", __doc__, settings=True)  # --set: for every run
+    ap = bench.parser
+    ap.add_argument("--short", action="store_true", help="fewer cases and frames (a few minutes on 2 cores)")
     ap.add_argument("--process", action="store_true", help="also time a pipelined worker process")
     ap.add_argument("--skip-stages", action="store_true", help="push latency only")
-    ap.add_argument("--latency-frames", type=int, default=None, help="640x480 frames per latency run (default 40 quick, 120)")
+    ap.add_argument("--latency-frames", type=int, default=None, help="640x480 frames per latency run (default 10 quick, 40 short, 120)")
     ap.add_argument("--rate", type=float, default=30.0, help="frames per second the latency runs feed (0: back to back)")
     ap.add_argument("--switch-interval", type=float, default=None, help="sys.setswitchinterval for the latency runs, --defaults too (s; Python's default 0.005)")
-    ap.add_argument("--set", action="append", default=[], help="dotted.key=value for every run")
     ap.add_argument("--defaults", action="store_true",
                     help="only: push latency with the package defaults on the shared real camera sessions and laser logs "
                          "(run it once with this tree and once with another checkout on PYTHONPATH to compare defaults)")
@@ -203,46 +206,66 @@ def main() -> None:
                          "stream)")
     ap.add_argument("--frame-kinds", action="store_true",
                     help="--defaults: also push and fusion times of the frames where a round lands, starts, or neither")
-    args = ap.parse_args()
+    args = bench.parse(argv)
     if args.laser_scans < 10:
         ap.error(f"--laser-scans must be at least 10, got {args.laser_scans}")
     if args.switch_interval is not None and not args.switch_interval > 0:
         ap.error(f"--switch-interval must be a positive number of seconds, got {args.switch_interval}")
+    size = "quick" if args.quick else "short" if args.short else "full"
+    previous_interval = sys.getswitchinterval()
     if args.switch_interval:  # how long a thread waiting for the GIL waits before asking for it
         sys.setswitchinterval(args.switch_interval)
+    try:
+        run(bench, args, size)
+    finally:
+        sys.setswitchinterval(previous_interval)
+    return bench.done()
+
+
+def run(bench, args, size: str) -> None:
     if args.defaults:
         import zfloc_stream
 
-        print(f"defaults of {Path(zfloc_stream.__file__).parent}: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; "
-              f"push ms, one warm-up pass, frames {'back to back' if args.rate <= 0 else f'at {args.rate:g} Hz'}", flush=True)
+        table = bench.table(["case", ("median_ms", "median"), ("p99_ms", "p99"), ("amortized_ms", "amortized"), ("first_pose", "first pose at frame"),
+                             ("p99_after_ms", "p99 after it"), ("slowest", "slowest frame"), ("max_ms", "its push")],
+                            title=f"defaults of {Path(zfloc_stream.__file__).parent}: push ms, one warm-up pass, frames "
+                                  f"{'back to back' if args.rate <= 0 else f'at {args.rate:g} Hz'}")
+        kinds = []
         for name, plan, frames, overrides in default_cases(args.laser_scans):
             s = defaults_latency(frames, plan, overrides + args.set, args.rate)
-            print(f"  {name:34s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  amortized {s['amortized']:6.1f}  "
-                  f"first pose at frame {s['first']}  p99 after it {s['p99_after']:6.1f}  "
-                  f"slowest: frame {s['slowest']} ({s['max']:.1f})", flush=True)
-            if args.frame_kinds:
-                print("    " + "; ".join(f"{k} x{n}: push median {m:.1f} max {x:.1f}, fusion median {f:.1f}"
-                                         for k, (n, m, x, f) in s["kinds"].items()), flush=True)
+            table.add(case=name, median_ms=s["median"], p99_ms=s["p99"], amortized_ms=s["amortized"], first_pose=s["first"],
+                      p99_after_ms=s["p99_after"], slowest=s["slowest"], max_ms=s["max"])
+            kinds += [(name, k, v) for k, v in s["kinds"].items()]
+        if args.frame_kinds:
+            by_kind = bench.table(["case", "kind", "n", ("push_median_ms", "push median ms"), ("push_max_ms", "push max ms"),
+                                   ("fusion_median_ms", "fusion median ms")], title="frames by kind")
+            for name, k, (n, m, x, f) in kinds:
+                by_kind.add(case=name, kind=k, n=n, push_median_ms=m, push_max_ms=x, fusion_median_ms=f)
         return
-    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms, median/p95 per stage, wall (cpu)", flush=True)
     if not args.skip_stages:
+        table = bench.table(["case", "rounds", "stage", "n", ("wall_median_ms", "wall median ms"), ("wall_p95_ms", "wall p95"),
+                             ("cpu_median_ms", "CPU median ms"), ("cpu_p95_ms", "CPU p95")],
+                            title=f"round stages, inline, GIL switch interval {sys.getswitchinterval() * 1000:g} ms")
         for cases in (scene_cases, session_cases, carmen_cases):
-            for name, plan, frames, overrides in cases(args.quick):
-                print_stages(name, stage_times(plan, frames, load_settings(overrides=overrides + ["localizer.pipeline=inline"] + args.set)))
+            for name, plan, frames, overrides in cases(size):
+                add_stages(table, name, stage_times(plan, frames, load_settings(overrides=overrides + ["localizer.pipeline=inline"] + args.set)))
 
-    n = args.latency_frames or (40 if args.quick else 120)
+    n = args.latency_frames or {"quick": 10, "short": 40, "full": 120}[size]
     scene = build_scene("apartment", seed=0)
     modes = [("inline", ["localizer.pipeline=inline"]), ("pipelined thread", ["localizer.pipeline=pipelined"])]
     if args.process:
         modes.append(("pipelined process", ["localizer.pipeline=pipelined", "localizer.worker=process"]))
-    print(f"push latency, 640x480 camera, apartment, {n} frames at {args.rate:g} Hz, GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms", flush=True)
-    for labels in (True, False):
+    table = bench.table(["input", "mode", ("median_ms", "median"), ("p99_ms", "p99"), ("max_ms", "max"), ("round_max_ms", "max on start/join frames"),
+                         ("wait_max_ms", "longest join wait")],
+                        title=f"push latency, 640x480 camera, apartment, {n} frames at {args.rate:g} Hz, "
+                              f"GIL switch interval {sys.getswitchinterval() * 1000:g} ms; ms")
+    for labels in (True,) if size == "quick" else (True, False):
         frames = simulate(scene, SimSettings(width=640, height=480, use_labels=labels), seed=0, n_frames=n).frames
         for mode, overrides in modes:
             s = push_latency(frames, scene.floorplan, overrides + args.set, args.rate)
-            print(f"  {'labels' if labels else 'geometric labeller':18s} {mode:18s} median {s['median']:6.1f}  p99 {s['p99']:6.1f}  "
-                  f"max {s['max']:6.1f}  max on start/join frames {s['round_max']:6.1f}  longest join wait {s['wait_max']:6.1f}", flush=True)
+            table.add(input="labels" if labels else "geometric labeller", mode=mode, median_ms=s["median"], p99_ms=s["p99"], max_ms=s["max"],
+                      round_max_ms=s["round_max"], wait_max_ms=s["wait_max"])
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

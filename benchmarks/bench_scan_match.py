@@ -2,35 +2,32 @@
 scan matcher leaves, and what fusing a scan costs (numbers, not asserts).
 
 Each shared Carmen log, whole, fused into a RollingBEV from drifting odometry (as
-benchmarks/eval_real.py makes it: datasets.odometry, times --drift). For every step
+benchmarks/evaluation/eval_real.py makes it: datasets.odometry, times --drift). For every step
 between consecutive scans, the relative motion of the plane poses (as fused) is compared
 with the true relative motion: translation error (cm) and heading error (deg), for the raw
 odometry and after matching. The share of steps whose heading error exceeds 2 deg is what
 smears the BEV and moves the pose off (docs/status.md, "Scan matching under cheap
 odometry").
 
-    python benchmarks/bench_scan_match.py                       # drift 1 and 3, every log
-    python benchmarks/bench_scan_match.py --drift 3 --logs orebro
-    python benchmarks/bench_scan_match.py --set bev.scan_match=none
+    python -m benchmarks.bench_scan_match                       # drift 1 and 3, every log
+    python -m benchmarks.bench_scan_match --drift 3 --logs orebro
+    python -m benchmarks.bench_scan_match --set bev.scan_match=none
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from eval_real import DATA, LOGS, drift_overrides  # noqa: E402
+from zfloc_stream.settings.loading import load_settings
+from zfloc_stream.io.datasets.carmen import carmen_sequence
+from zfloc_stream.errors import ZflocError
+from zfloc_stream.frontend.bev import RollingBEV, plane_pose
+from zfloc_stream.geometry.sim2 import wrap_angle
 
-from zfloc_stream.settings.loading import load_settings  # noqa: E402
-from zfloc_stream.io.datasets.carmen import carmen_sequence  # noqa: E402
-from zfloc_stream.errors import ZflocError  # noqa: E402
-from zfloc_stream.frontend.bev import RollingBEV, plane_pose  # noqa: E402
-from zfloc_stream.geometry.sim2 import wrap_angle  # noqa: E402
+from benchmarks.evaluation.eval_real import DATA, LOGS, drift_overrides
+from benchmarks.harness import Benchmark
 
 
 def relative_steps(poses: np.ndarray) -> np.ndarray:
@@ -46,15 +43,16 @@ def step_errors(poses: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.hypot(e[:, 0], e[:, 1]), np.rad2deg(np.abs(wrap_angle(e[:, 2])))
 
 
-def describe(translation: np.ndarray, heading: np.ndarray) -> str:
-    return (f"{100 * np.median(translation):5.1f} {100 * np.quantile(translation, 0.9):5.1f} | "
-            f"{np.median(heading):5.2f} {np.quantile(heading, 0.9):5.2f} {100 * np.mean(heading > 2.0):5.1f}%")
+def describe(prefix: str, translation: np.ndarray, heading: np.ndarray) -> dict:
+    return {f"{prefix}_cm": 100 * float(np.median(translation)), f"{prefix}_cm_p90": 100 * float(np.quantile(translation, 0.9)),
+            f"{prefix}_deg": float(np.median(heading)), f"{prefix}_deg_p90": float(np.quantile(heading, 0.9)),
+            f"{prefix}_over_2deg_pct": 100 * float(np.mean(heading > 2.0))}
 
 
-def run(log: str, drift: float, overrides: list[str]) -> str:
+def run(log: str, drift: float, overrides: list[str], scans: int | None = None) -> dict:
     settings = load_settings(overrides=drift_overrides(drift) + overrides).model_copy(update={"seed": 0})
     seq = carmen_sequence(DATA / f"{log}-corrected.log.gz", settings)
-    frames = list(seq.frames(0, seq.n_frames))
+    frames = list(seq.frames(0, seq.n_frames if scans is None else min(scans, seq.n_frames)))
     truth = np.array([f.ground_truth for f in frames])
     bev = RollingBEV(settings)
     fused, odometry, ms = [], [], []
@@ -64,18 +62,20 @@ def run(log: str, drift: float, overrides: list[str]) -> str:
         ms.append(1e3 * (time.perf_counter() - t0))
         fused.append(bev.plane_pose(frame))
         odometry.append(plane_pose(frame.T_odom_sensor, np.eye(3), "x"))
-    raw = describe(*step_errors(np.array(odometry), truth))
-    matched = describe(*step_errors(np.array(fused), truth))
-    return (f"| {log} | {drift:g} | {len(frames)} | {raw} | {matched} | "
-            f"{np.median(ms):.2f} / {np.quantile(ms, 0.99):.2f} |")
+    return {"log": log, "drift": drift, "scans": len(frames), **describe("odometry", *step_errors(np.array(odometry), truth)),
+            **describe("matched", *step_errors(np.array(fused), truth)),
+            "fusion_ms": float(np.median(ms)), "fusion_ms_p99": float(np.quantile(ms, 0.99))}
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    bench = Benchmark("scan_match", __doc__, settings=True)
+    parser = bench.parser
     parser.add_argument("--logs", default=",".join(LOGS))
     parser.add_argument("--drift", type=float, action="append", help="odometry drift multiplier (repeatable; default 1 and 3)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings override")
-    args = parser.parse_args(argv)
+    args = bench.parse(argv)
+    scans = None
+    if args.quick:  # the first 30 scans of intel, drift 1
+        args.logs, args.drift, scans = "intel", [1.0], 30
     logs = [name for name in args.logs.split(",") if name]
     missing = [name for name in logs if not (DATA / f"{name}-corrected.log.gz").exists()]
     if missing or not logs:
@@ -85,14 +85,17 @@ def main(argv=None) -> int:
             load_settings(overrides=drift_overrides(drift) + args.set)
     except ZflocError as err:
         parser.error(str(err))
-    print("step errors: translation cm (median, 90%) | heading deg (median, 90%, share over 2 deg)\n")
-    print("| log | drift | scans | odometry | after scan matching | fusion ms (median / 99%) |")
-    print("|---|---|---|---|---|---|")
+    columns = ["log", "drift", "scans"]
+    for prefix, label in (("odometry", "odometry"), ("matched", "after scan matching")):
+        columns += [(f"{prefix}_cm", f"{label} cm"), (f"{prefix}_cm_p90", "90%"), (f"{prefix}_deg", "deg"), (f"{prefix}_deg_p90", "90%"),
+                    (f"{prefix}_over_2deg_pct", "% over 2 deg")]
+    table = bench.table(columns + [("fusion_ms", "fusion ms"), ("fusion_ms_p99", "99%")],
+                        title="step errors: translation cm (median, 90%), heading deg (median, 90%, share over 2 deg)")
     for drift in args.drift or [1.0, 3.0]:
         for log in logs:
-            print(run(log, drift, args.set), flush=True)
-    return 0
+            table.add(**run(log, drift, args.set, scans))
+    return bench.done()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -8,8 +8,8 @@ numpy, torch on CPU, and torch on CUDA when torch sees a GPU. The torch scores e
 numpy ones (checked here on every call: bit for bit on CPU, within one point per
 hypothesis on a GPU; tests/test_scoring_torch.py).
 
-    python benchmarks/bench_scoring.py
-    python benchmarks/bench_scoring.py --hypotheses 100 1000 10000 --repeats 5
+    python -m benchmarks.bench_scoring
+    python -m benchmarks.bench_scoring --hypotheses 100 1000 10000 --repeats 5
 
 Measured on the shared 2-core machine (no GPU; load average ~2 from other jobs):
 
@@ -38,18 +38,15 @@ layout for a GPU): keep numpy there. No GPU was available to measure the CUDA co
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from profile_round import build_case  # noqa: E402
+from zfloc_stream.estimation.scoring import BevView, floorplan_scorer, scoring_kernels, sparse_line_points
+from zfloc_stream.stream.localizer import Localizer
 
-from zfloc_stream.estimation.scoring import BevView, floorplan_scorer, scoring_kernels, sparse_line_points  # noqa: E402
-from zfloc_stream.stream.localizer import Localizer  # noqa: E402
+from benchmarks.harness import Benchmark
+from benchmarks.profile_round import build_case
 
 
 def best_ms(fn, repeats: int) -> tuple[float, np.ndarray]:
@@ -62,54 +59,58 @@ def best_ms(fn, repeats: int) -> tuple[float, np.ndarray]:
     return 1000 * min(times), out
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hypotheses", type=int, nargs="+", default=[50, 500, 5000])
-    ap.add_argument("--repeats", type=int, default=3)
-    args = ap.parse_args()
+def main(argv=None) -> int:
+    bench = Benchmark("scoring", __doc__, repeat=3)
+    bench.parser.add_argument("--hypotheses", type=int, nargs="+", default=[50, 500, 5000])
+    args = bench.parse(argv)
+    scans = 30
+    if args.quick:  # 10 scans, 20 hypotheses, numpy and torch on the CPU, one repeat
+        scans, args.hypotheses, args.repeat = 10, [20], 1
     floorplan, frames, settings = build_case("laser-aces")
     localizer = Localizer(floorplan, settings)
-    for frame in frames[:30]:
+    for frame in frames[:scans]:
         localizer.push(frame)
     obs = localizer.bev.observation(np.random.default_rng(0))
     cfg = settings.estimator.scoring
     view = BevView.of(obs, cfg.tau_v)
     sparse = sparse_line_points(obs.lines, cfg.sparse_spacing, cfg.max_sparse_points)
-    print(f"BEV: {len(obs.wall_points)} wall points, {len(sparse)} sparse; floorplan: "
-          f"{len(floorplan_scorer(floorplan, cfg).wall_points)} wall points for Cv")
+    bench.note(f"BEV: {len(obs.wall_points)} wall points, {len(sparse)} sparse; floorplan: "
+               f"{len(floorplan_scorer(floorplan, cfg).wall_points)} wall points for Cv")
     backends = [("numpy", "numpy", "cpu")]
     try:
         import torch
 
         backends.append(("torch-cpu", "torch", "cpu"))
-        if torch.cuda.is_available():
+        if torch.cuda.is_available() and not args.quick:
             backends.append(("torch-cuda", "torch", "cuda"))
     except ImportError:
-        print("torch not installed: numpy only")
+        bench.note("torch not installed: numpy only")
     x0, y0, x1, y1 = floorplan.extent
     rng = np.random.default_rng(0)
     models = {n: np.column_stack([rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(-np.pi, np.pi, n), np.ones(n)])
               for n in args.hypotheses}
     reference = {}
-    print(f"{'backend':10s} {'n':>6s} {'coarse':>8s} {'full':>8s} {'Cv':>8s}   (ms)")
+    table = bench.table(["backend", ("n", "hypotheses"), ("coarse_ms", "coarse ms"), ("full_ms", "full ms"), ("cv_ms", "Cv ms"),
+                         ("worst_difference", "largest difference from numpy")])
     for label, backend, device in backends:
         kernels = scoring_kernels(floorplan, cfg.model_copy(update={"backend": backend, "device": device}))
         for n, m in models.items():
-            row = []
+            row, worst_all = [], 0.0
             for stage, fn, n_points in (
                 ("coarse", lambda: kernels.coarse_consistency(m, sparse, cfg.chunk_size), len(sparse)),
                 ("full", lambda: kernels.consistency(m, obs.wall_points, cfg.tau_c, cfg.chunk_size), len(obs.wall_points)),
                 ("cv", lambda: kernels.violation(m, view, cfg.tau_v, cfg.chunk_size, cfg.violation_per), None),
             ):
-                ms, out = best_ms(fn, args.repeats)
+                ms, out = best_ms(fn, args.repeat)
                 row.append(ms)
                 ref = reference.setdefault((n, stage), out)
                 worst = float(np.abs(out - ref).max())
+                worst_all = max(worst_all, worst)
                 if worst > (1.0 / n_points if n_points else 0.02) + 1e-12:
-                    print(f"  {label} {stage} n={n}: differs from numpy by {worst:.3g}")
-            print(f"{label:10s} {n:6d} {row[0]:8.1f} {row[1]:8.1f} {row[2]:8.1f}")
-    return 0
+                    bench.note(f"  {label} {stage} n={n}: differs from numpy by {worst:.3g}")
+            table.add(backend=label, n=n, coarse_ms=row[0], full_ms=row[1], cv_ms=row[2], worst_difference=worst_all)
+    return bench.done()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

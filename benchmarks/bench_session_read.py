@@ -1,13 +1,13 @@
 """Reading long sessions: building the Sequence, a deep slice against the first frames,
 and peak memory while iterating every frame; the old path against the new one.
 
-    .venv/bin/python benchmarks/bench_session_read.py                          # 2000 frames
-    .venv/bin/python benchmarks/bench_session_read.py --frames 5000 --session /tmp/long.mcap   # kept, reused
+    python -m benchmarks.bench_session_read                          # 2000 frames
+    python -m benchmarks.bench_session_read --frames 5000 --session /tmp/long.mcap   # kept, reused
 
 The session (written once, reused when --session names an existing file) is a built-in
 scene's camera walk (160x120 depth + labels) run through the real localizer by
 `record_session`: every input, every output, the BEV every 10 frames, 10 frames a chunk.
-Each measurement runs in a fresh process:
+Each measurement runs in a fresh process (--quick: 20 frames of rooms):
 
 - old: what the code did before the frame index, still there as the sequential reference
   path: `records(seek=False)` decodes every message from the file's start, logged outputs
@@ -41,7 +41,9 @@ from zfloc_stream.settings.loading import Settings
 from zfloc_stream.io.datasets.mcap import session_sequence
 from zfloc_stream.io.session import read_session
 
-SLICE = 50
+from benchmarks.harness import ROOT, Benchmark
+
+SLICE = 50  # frames in a slice (at most half the session)
 
 
 def write_session(path: Path, n_frames: int, scene_name: str) -> None:
@@ -82,16 +84,18 @@ def measure_times(path: Path, mode: str) -> dict:
             return [r.frame for r in read_session(path).records(a, b, seek=False)]
 
         n, t_open = timed(sequence)
-        deep, t_deep = timed(lambda: frames(n - SLICE, n))
-        _, t_head = timed(lambda: frames(0, SLICE))
+        k = min(SLICE, n // 2)
+        deep, t_deep = timed(lambda: frames(n - k, n))
+        _, t_head = timed(lambda: frames(0, k))
         t_cold = t_deep
     else:
         seq, t_open = timed(lambda: session_sequence(path, Settings()))
         n = seq.n_frames
-        deep, t_deep = timed(lambda: list(seq.frames(n - SLICE, n)))
-        _, t_head = timed(lambda: list(seq.frames(0, SLICE)))
-        _, t_cold = timed(lambda: [r.frame for r in read_session(path).records(n - SLICE, n)])
-    return {"n": n, "open": t_open, "deep": t_deep, "head": t_head, "cold_deep": t_cold, "digest": digest(deep)}
+        k = min(SLICE, n // 2)
+        deep, t_deep = timed(lambda: list(seq.frames(n - k, n)))
+        _, t_head = timed(lambda: list(seq.frames(0, k)))
+        _, t_cold = timed(lambda: [r.frame for r in read_session(path).records(n - k, n)])
+    return {"n": n, "slice": k, "open": t_open, "deep": t_deep, "head": t_head, "cold_deep": t_cold, "digest": digest(deep)}
 
 
 def measure_memory(path: Path, mode: str) -> dict:
@@ -110,22 +114,23 @@ def measure_memory(path: Path, mode: str) -> dict:
 
 
 def run_child(path: Path, what: str, mode: str) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--session", str(path), "--child", what, mode],
-                         check=True, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "benchmarks.bench_session_read", "--session", str(path), "--child", what, mode],
+                         check=True, capture_output=True, text=True, cwd=ROOT)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=2000)
-    ap.add_argument("--scene", default="apartment")
-    ap.add_argument("--session", type=Path, help="session file to use (written there first if missing)")
-    ap.add_argument("--child", nargs=2, metavar=("WHAT", "MODE"), help=argparse.SUPPRESS)
-    args = ap.parse_args()
+def main(argv=None) -> int:
+    bench = Benchmark("session_read", __doc__, frames=2000)
+    bench.parser.add_argument("--scene", default="apartment")
+    bench.parser.add_argument("--session", type=Path, help="session file to use (written there first if missing)")
+    bench.parser.add_argument("--child", nargs=2, metavar=("WHAT", "MODE"), help=argparse.SUPPRESS)
+    args = bench.parse(argv)
     if args.child:
         what, mode = args.child
         print(json.dumps((measure_times if what == "times" else measure_memory)(args.session, mode)))
-        return
+        return 0
+    if args.quick:
+        args.frames, args.scene = 20, "rooms"
 
     with tempfile.TemporaryDirectory() as tmp:
         path = args.session or Path(tmp) / "long.mcap"
@@ -135,25 +140,27 @@ def main() -> None:
         n_chunks = len(read_session(path).summary.chunk_indexes)
         res = {(w, m): run_child(path, w, m) for w in ("times", "memory") for m in ("old", "new")}
     old, new = res["times", "old"], res["times", "new"]
-    n = old["n"]
-    print(f"{path.name}: {n} frames, {size:.1f} MB, {n_chunks} chunks")
+    n, k = old["n"], old["slice"]
+    bench.note(f"{path.name}: {n} frames, {size:.1f} MB, {n_chunks} chunks")
     assert new["n"] == n and new["digest"] == old["digest"], "the new path read other frames than the old one"
     rows = [
         ("open + Sequence (n_frames, ground truth)", "open"),
-        (f"frames [{n - SLICE}, {n}) of the Sequence", "deep"),
-        (f"frames [0, {SLICE}) of the Sequence", "head"),
-        (f"cold: read_session + records({n - SLICE}, {n})", "cold_deep"),
+        (f"frames [{n - k}, {n}) of the Sequence", "deep"),
+        (f"frames [0, {k}) of the Sequence", "head"),
+        (f"cold: read_session + records({n - k}, {n})", "cold_deep"),
     ]
-    print(f"{'':48s} {'old':>9s} {'new':>9s} {'speed-up':>9s}")
+    times = bench.table(["step", ("old_s", "old s"), ("new_s", "new s"), "speedup"], title=f"times, {n} frames")
     for label, key in rows:
-        print(f"{label:48s} {old[key]:8.3f}s {new[key]:8.3f}s {old[key] / max(new[key], 1e-9):8.1f}x")
+        times.add(step=label, key=key, old_s=old[key], new_s=new[key], speedup=old[key] / max(new[key], 1e-9))
     mo, mn = res["memory", "old"], res["memory", "new"]
-    print(f"{'iterate all frames':48s} {mo['all']:8.3f}s {mn['all']:8.3f}s {mo['all'] / mn['all']:8.1f}x")
-    print(f"{'RSS growth while iterating all frames':48s} {mo['growth_mb']:7.1f}MB {mn['growth_mb']:7.1f}MB")
-    print(f"{'RSS after opening (before iterating)':48s} {mo['base_mb']:7.1f}MB {mn['base_mb']:7.1f}MB")
-    print(f"{'peak RSS of the process (open + iterate)':48s} {mo['maxrss_mb']:7.1f}MB {mn['maxrss_mb']:7.1f}MB")
-    print(f"deep slice identical in both paths (sha256 {new['digest']})")
+    times.add(step="iterate all frames", key="all", old_s=mo["all"], new_s=mn["all"], speedup=mo["all"] / max(mn["all"], 1e-9))
+    memory = bench.table(["measure", ("old_mib", "old MiB"), ("new_mib", "new MiB")], title="memory")
+    memory.add(measure="RSS growth while iterating all frames", key="growth_mb", old_mib=mo["growth_mb"], new_mib=mn["growth_mb"])
+    memory.add(measure="RSS after opening (before iterating)", key="base_mb", old_mib=mo["base_mb"], new_mib=mn["base_mb"])
+    memory.add(measure="peak RSS of the process (open + iterate)", key="maxrss_mb", old_mib=mo["maxrss_mb"], new_mib=mn["maxrss_mb"])
+    bench.note(f"deep slice identical in both paths (sha256 {new['digest']})")
+    return bench.done()
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -1,8 +1,8 @@
 """What a stopped run leaves behind: `zfloc-stream demo` stopped by SIGTERM, and killed
 by SIGKILL at random points.
 
-    .venv/bin/python benchmarks/bench_signals.py                  # 1 SIGTERM + 10 SIGKILLs
-    .venv/bin/python benchmarks/bench_signals.py --kills 20 --frames 80 --seed 3
+    python -m benchmarks.bench_signals                  # 1 SIGTERM + 10 SIGKILLs
+    python -m benchmarks.bench_signals --kills 20 --frames 80 --seed 3
 
 Each run writes trajectory.csv one flushed row per finished frame, so its row count is
 the frames the run had finished when the signal came. SIGTERM: the exit code, whether
@@ -10,11 +10,11 @@ session.mcap reads without --salvage (footer written) and how many frames it hol
 SIGKILL (at a seeded random moment once the first frame is out): frames read back with
 salvage against the rows in trajectory.csv; "lost" counts finished frames missing from
 the file (the goal: none; the frame being written when the kill came is not finished).
+--quick: 8 frames, one SIGKILL.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import subprocess
@@ -27,6 +27,8 @@ import numpy as np
 
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.io.session import read_session
+
+from benchmarks.harness import Benchmark
 
 
 def start(out: Path, frames: int, scene: str, overrides=()) -> subprocess.Popen:
@@ -92,24 +94,23 @@ def sigkills(tmp: Path, frames: int, scene: str, kills: int, seed: int, override
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--frames", type=int, default=50)
-    p.add_argument("--scene", default="rooms")
-    p.add_argument("--kills", type=int, default=10)
-    p.add_argument("--seed", type=int, default=29)
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="settings for the killed runs (e.g. logging.chunk_max_frames=10)")
-    args = p.parse_args(argv)
+    bench = Benchmark("signals", __doc__, frames=50, seed=29, settings=True)  # --set: settings for the killed runs
+    bench.parser.add_argument("--scene", default="rooms")
+    bench.parser.add_argument("--kills", type=int, default=10)
+    args = bench.parse(argv)
+    if args.quick:
+        args.frames, args.kills = 8, 1
     with tempfile.TemporaryDirectory(prefix="zfloc-signals-") as tmp:
         term = sigterm(Path(tmp), args.frames, args.scene)
-        print(f"SIGTERM: exit {term['exit']}, footer written: {term['footer']}, {term['frames_read']} frames read "
-              f"(trajectory.csv: {term['csv_rows']} rows); stderr: {term['stderr']!r}")
-        results = sigkills(Path(tmp), args.frames, args.scene, args.kills, args.seed, args.set)
-        for r in results:
-            late = " (the run had ended before the kill)" if r["ended_before"] else ""
-            print(f"SIGKILL {r['kill']}: {r['csv_rows']} frames finished, {r['salvaged']} read back with salvage, lost {r['lost']}{late}")
-        print(f"SIGKILL x{len(results)}: frames lost per kill {[r['lost'] for r in results]}, max {max(r['lost'] for r in results)}")
-    return 0
+        bench.table(["signal", ("exit", "exit code"), ("footer", "footer written"), ("frames_read", "frames read"),
+                     ("csv_rows", "trajectory.csv rows")], title="SIGTERM").add(signal="SIGTERM", **term)
+        bench.note(f"stderr: {term['stderr']!r}")
+        table = bench.table(["kill", ("csv_rows", "frames finished"), ("salvaged", "read back with salvage"), "lost",
+                             ("ended_before", "run ended before the kill")], title="SIGKILL")
+        results = [table.add(**r) for r in sigkills(Path(tmp), args.frames, args.scene, args.kills, args.seed, args.set)]
+        bench.note(f"SIGKILL x{len(results)}: frames lost per kill {[r['lost'] for r in results]}, max {max(r['lost'] for r in results)}")
+    return bench.done()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

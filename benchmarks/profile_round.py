@@ -1,6 +1,6 @@
 """Where a round's time goes on the shared real buildings (issue 10).
 
-Cases: two held-out Carmen laser windows (fixed scale, as benchmarks/eval_real.py builds
+Cases: two held-out Carmen laser windows (fixed scale, as benchmarks/evaluation/eval_real.py builds
 them) and the camera session intel-camera-30 (scale_mode prior, and free). Each case runs
 a fresh Localizer twice over the same frames: the first pass fills the per-floorplan
 caches (its first round is reported as "cold"), the second is measured (caches warm).
@@ -11,17 +11,16 @@ mode confidently tracked: the full search, correlative seeding included) and tra
 (estimator.ransac.tracking_iterations, no global search); the laser-*-300 cases are longer
 stretches (scans 100-400) where most rounds are tracked.
 
-    python benchmarks/profile_round.py                      # all cases, stage table
-    python benchmarks/profile_round.py --cases camera-prior --profile 25
-    python benchmarks/profile_round.py --set estimator.scoring.backend=torch
-    python benchmarks/profile_round.py --dump out.json      # per-frame status + pose, to
-    python benchmarks/profile_round.py --compare a.json b.json   # compare two code versions
-    python benchmarks/profile_round.py --cases laser-aces-300,laser-fhw-300,laser-intel-300
+    python -m benchmarks.profile_round                      # all cases, stage table
+    python -m benchmarks.profile_round --cases camera-prior --profile 25
+    python -m benchmarks.profile_round --set estimator.scoring.backend=torch
+    python -m benchmarks.profile_round --dump out.json      # per-frame status + pose, to
+    python -m benchmarks.profile_round --compare a.json b.json   # compare two code versions
+    python -m benchmarks.profile_round --cases laser-aces-300,laser-fhw-300,laser-intel-300
 """
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import os
 import json
@@ -34,7 +33,9 @@ import numpy as np
 
 from zfloc_stream.stream.localizer import Localizer
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+from benchmarks.harness import Benchmark
+from benchmarks.shared_data import SHARED_DATA as SHARED
+
 STAGES = ("primitives", "model_estimation", "scoring", "refinement", "tracking", "local_refinement")
 LASER = {"laser-aces": ("aces", 200, 50), "laser-fhw": ("fhw", 300, 35),
          # optional (not in the default run)
@@ -47,13 +48,21 @@ CAMERA.update({f"camera-{b}-{m}": (f"{b}-camera-50", m) for b in ("aces", "belgi
 DEFAULT = ["laser-aces", "laser-fhw", "camera-prior", "camera-free"]
 
 
+# The modules build_case needs, in the package's folders, and where a checkout from before
+# the folders (issue 42) had them (a reference for --against)
+MODULES = ("settings.loading", "io.datasets.carmen", "plans.floorplan", "stream.localizer", "io.session")
+FLAT_MODULES = ("config", "datasets.carmen", "floorplan", "localizer", "session")
+
+
 def package(prefix: str = "zfloc_stream"):
     """The modules build_case needs, from the installed package or from a reference
     checkout loaded under another name (--against)."""
     import importlib
 
-    names = ("config", "datasets.carmen", "floorplan", "localizer", "session")
-    return [importlib.import_module(f"{prefix}.{n}") for n in names]
+    try:
+        return [importlib.import_module(f"{prefix}.{n}") for n in MODULES]
+    except ModuleNotFoundError:
+        return [importlib.import_module(f"{prefix}.{n}") for n in FLAT_MODULES]
 
 
 def load_reference(checkout: Path, alias: str = "zfloc_ref") -> str:
@@ -150,16 +159,17 @@ def record(estimates) -> list[dict]:
              "skipped": e.skipped} for e in estimates]
 
 
-def summary(name: str, warm: list[dict], cold_first: float, kinds: list[str]) -> str:
-    lines = [f"{name}: {len(warm)} rounds, cold first round {cold_first:.0f} ms"]
+def add_summary(table, name: str, warm: list[dict], cold_first: float, kinds: list[str], seconds: float) -> None:
+    """Rows of one case: per stage median / p95 / max of the warm rounds, then the global
+    and the tracked rounds apart (a tracked round skips the global search)."""
     for k in (*STAGES, "round"):
         v = np.array([r[k] for r in warm])
-        lines.append(f"  {k:17s} median {np.median(v):7.1f}  p95 {np.percentile(v, 95):7.1f}  max {v.max():7.1f}")
-    for kind in ("global", "tracked"):  # a tracked round skips the global search
+        table.add(case=name, rows=k, n=len(v), median_ms=float(np.median(v)), p95_ms=float(np.percentile(v, 95)), max_ms=float(v.max()),
+                  cold_first_round_ms=cold_first, whole_pass_s=seconds)
+    for kind in ("global", "tracked"):
         v = np.array([r["round"] for r, q in zip(warm, kinds) if q == kind])
         if len(v):
-            lines.append(f"  {kind + ' rounds':17s} {len(v):4d}, round median {np.median(v):7.1f}")
-    return "\n".join(lines)
+            table.add(case=name, rows=f"{kind} rounds", n=len(v), median_ms=float(np.median(v)))
 
 
 def compare(a_path: Path, b_path: Path) -> int:
@@ -184,15 +194,18 @@ def compare(a_path: Path, b_path: Path) -> int:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    # --repeat: warm passes, each round's stage times the minimum over them (a busy machine);
+    # --set: for every case (e.g. estimator.scoring.backend=torch)
+    bench = Benchmark("profile_round", __doc__, repeat=1, settings=True)
+    parser = bench.parser
     parser.add_argument("--cases", default=",".join(DEFAULT), help=f"any of {', '.join([*LASER, *CAMERA])}")
     parser.add_argument("--profile", type=int, default=0, help="cProfile the warm pass; print this many functions")
-    parser.add_argument("--repeat", type=int, default=1, help="warm passes; each round's stage times are the minimum over them (a busy machine)")
     parser.add_argument("--dump", type=Path, help="write per-frame status + pose of every case here (JSON)")
     parser.add_argument("--compare", type=Path, nargs=2, metavar=("A", "B"))
-    parser.add_argument("--set", action="append", default=[], help="dotted.key=value for every case (e.g. estimator.scoring.backend=torch)")
     parser.add_argument("--against", type=Path, metavar="CHECKOUT", help="run a reference checkout's code side by side (A/B)")
-    args = parser.parse_args(argv)
+    args = bench.parse(argv)
+    if args.quick:  # the first 20 scans of the fhw window
+        args.cases = "laser-fhw"
     unknown = [c for c in args.cases.split(",") if c not in LASER and c not in CAMERA]
     if unknown and not args.compare:
         parser.error(f"--cases: unknown case(s) {', '.join(unknown)}; known: {', '.join([*LASER, *CAMERA])}")
@@ -213,10 +226,13 @@ def main(argv=None) -> int:
         return 0
     import zfloc_stream
 
-    print(f"zfloc_stream from {Path(zfloc_stream.__file__).parent}")
+    bench.note(f"zfloc_stream from {Path(zfloc_stream.__file__).parent}")
+    table = bench.table(["case", ("rows", "stage"), "n", ("median_ms", "median ms"), ("p95_ms", "p95"), ("max_ms", "max"),
+                         ("cold_first_round_ms", "cold first round ms"), ("whole_pass_s", "whole pass s")], title="round stages, warm")
     dump, all_warm = {}, []
     for name in args.cases.split(","):
         floorplan, frames, settings = build_case(name, overrides=tuple(args.set))
+        frames = frames[:20] if args.quick else frames
         cold = run(floorplan, frames, settings)
         cold_rounds = rounds(cold)
         profiler = cProfile.Profile() if args.profile else None
@@ -231,7 +247,7 @@ def main(argv=None) -> int:
             warm_rounds = [{k: min(r[k], q[k]) for k in r} for r, q in zip(warm_rounds, rounds(run(floorplan, frames, settings)))]
         if profiler:
             profiler.disable()
-        print(summary(name, warm_rounds, cold_rounds[0]["round"] if cold_rounds else float("nan"), kinds) + f"\n  whole pass {seconds:.2f} s")
+        add_summary(table, name, warm_rounds, cold_rounds[0]["round"] if cold_rounds else float("nan"), kinds, seconds)
         if profiler:
             pstats.Stats(profiler).sort_stats(os.environ.get("SORT", "tottime")).print_stats(args.profile)
         if name in LASER or CAMERA[name][1] == "prior":
@@ -240,11 +256,11 @@ def main(argv=None) -> int:
         assert record(cold) == dump[name], f"{name}: the cold and warm passes differ"
     if all_warm:
         v = np.array([r["round"] for r in all_warm])
-        print(f"metric prior/fixed, all rounds: median {np.median(v):.1f} ms, p95 {np.percentile(v, 95):.1f} ms")
+        table.add(case="metric prior/fixed, all", rows="round", n=len(v), median_ms=float(np.median(v)), p95_ms=float(np.percentile(v, 95)))
     if args.dump:
         args.dump.write_text(json.dumps(dump, indent=0))
-    return 0
+    return bench.done()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -5,14 +5,23 @@ a test module (importing a test file from another couples them and re-collects n
 
     plan_helpers     a small synthetic building and a BEV observation of it (scoring, RANSAC)
     laser_helpers    simulated 2D laser walks and Carmen logs written from them
-    session_helpers  fake and real-engine MCAP sessions
-    backbone_helpers RGB frames and sessions for the camera backbones
-    frontend_scene   camera sequences with known walls (gravity, wall mask, BEV)
+    session_helpers  stand-in estimates, fake and real-engine MCAP sessions
     ros2_bag         rosbag2 MCAP writers
-    fuzz_inputs      hostile floorplans and settings
     draw_helpers     a synthetic solver workload (BEV lines, a cluttered floorplan)
     localizer_helpers  running a Localizer: odometry jumps, overrides, estimates as bytes
-    shared_data      where ../shared/data lies (beside the checkout, else /work/shared/data)
+
+Inputs the benchmarks build too live once, in benchmarks/ (imported as `benchmarks.…`; the
+repository root is on pytest's pythonpath, pyproject.toml):
+
+    benchmarks/inputs/session_frames    random camera and laser frames
+    benchmarks/inputs/hostile_sessions  sessions written out of order or otherwise odd
+    benchmarks/inputs/random_backbones  RGB frames, sessions and toy networks for the backbones
+    benchmarks/inputs/box_world         camera sequences with known walls (gravity, wall mask, BEV)
+    benchmarks/inputs/hostile_plans     hostile floorplans and settings
+    benchmarks/inputs/plan_bombs        large or malicious vector plans
+    benchmarks/inputs/batch_trial       the batch-localization scenario
+    benchmarks/shared_data              where ../shared/data lies (beside the checkout, else /work/shared/data)
+    benchmarks/evaluation/plan_drawing  a raster map redrawn as an architect's plan
 
 This conftest puts the tests folder on sys.path (whatever pytest's import mode), so test
 files import them by name.

@@ -7,7 +7,7 @@ network ones are skipped without the [torch] extra."""
 import numpy as np
 import pytest
 
-from backbone_helpers import random_images, save_segmentation_model
+from benchmarks.inputs.random_backbones import random_images, save_segmentation_model
 
 from zfloc_stream.backbones import Perception, class_codes
 from zfloc_stream.backbones.perception import needs_backbones

@@ -8,7 +8,7 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from backbone_helpers import rgb_frames, write_rgb_session
+from benchmarks.inputs.random_backbones import rgb_frames, write_rgb_session
 from mcap.writer import Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 

@@ -8,7 +8,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("transformers")
 
-from backbone_helpers import (  # noqa: E402
+from benchmarks.inputs.random_backbones import (  # noqa: E402
     ADE_LIKE,
     random_images,
     rgb_frames,

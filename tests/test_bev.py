@@ -123,7 +123,7 @@ def test_same_input_same_observation():
 
 
 def test_camera_fusion_puts_walls_on_walls_and_memory_stays_flat():
-    from frontend_scene import CameraFrame, camera_sequence, distance_to_true_walls, plane_to_world
+    from benchmarks.inputs.box_world import CameraFrame, camera_sequence, distance_to_true_walls, plane_to_world
 
     frames, T_odom_world = camera_sequence(make_rng(0, "bev-camera"), 12, noise=0.0015)
     bev = RollingBEV(Settings())  # cameras are not scan matched by default: the plane frame is the odometry's

@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.tools.cli import main
 

@@ -18,8 +18,8 @@ import pytest
 
 from laser_helpers import laser_run, write_carmen
 from ros2_bag import mount, write_sensor_bag
-from session_helpers import laser_frames
-from session_hostile import frame_messages, with_timestamps, write_messages
+from benchmarks.inputs.session_frames import laser_frames
+from benchmarks.inputs.hostile_sessions import frame_messages, with_timestamps, write_messages
 
 from zfloc_stream.errors import InputError
 from zfloc_stream.frames import FLOOR, WALL

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.io.datasets import detect_source, open_dataset

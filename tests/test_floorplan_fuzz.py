@@ -4,14 +4,14 @@ guess: every one loads, or is one FloorplanError line (exit 2 from the CLI).
 The inputs issue 29 found (units ezdxf cannot convert, NaN / inf / 1e400 coordinates,
 GeoJSON of the wrong types or nested 100,000 deep, a 20,000 x 20,000 PNG, resolution 1e6,
 origin 1e308, negative radii, an all-black map...) each have a case; a seeded fuzz over
-all five formats covers the rest. benchmarks/fuzz_inputs.py runs the same generator on
+all five formats covers the rest. benchmarks/evaluation/fuzz_run.py runs the same generator on
 thousands of cases with a memory budget."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from fuzz_inputs import BOX, fuzz_floorplan, issue_floorplans, write_dxf
+from benchmarks.inputs.hostile_plans import BOX, fuzz_floorplan, issue_floorplans, write_dxf
 
 from zfloc_stream.errors import ZflocError
 from zfloc_stream.plans.loading import load_floorplan

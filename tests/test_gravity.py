@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from frontend_scene import camera_sequence
+from benchmarks.inputs.box_world import camera_sequence
 
 from zfloc_stream.settings.loading import GravitySettings, load_settings
 from zfloc_stream.errors import InputError

@@ -425,7 +425,7 @@ def test_metric_odometry_at_a_scale_other_than_a_prior_is_said_to_do_nothing():
 
 def _carried_along_the_offices(audit_frames=None):
     """The repetitive building (scene 'offices', seed 5), laser, walked as
-    benchmarks/eval_scenes.py --kidnap walks it: along its corridor and back, carried twice
+    benchmarks/evaluation/eval_scenes.py --kidnap walks it: along its corridor and back, carried twice
     five offices (19.9 and 19.7 m) along the corridor to a place that looks like the one it
     left, the odometry standing still across each cut (sim/kidnap.py)."""
     from zfloc_stream.sim.kidnap import corridor_kidnaps, played

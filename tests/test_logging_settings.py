@@ -5,8 +5,9 @@ summary's success (logging.success_distance / success_last_frames)."""
 import numpy as np
 import pytest
 
-from session_helpers import laser_frames, write_fake_session
-from session_hostile import frame_messages, write_messages
+from benchmarks.inputs.session_frames import laser_frames
+from session_helpers import write_fake_session
+from benchmarks.inputs.hostile_sessions import frame_messages, write_messages
 
 from zfloc_stream.estimate import Estimate
 from zfloc_stream.io.datasets.mcap import session_sequence

@@ -65,7 +65,7 @@ def test_right_map_tracks_without_a_verdict(office_frames):
 @pytest.mark.slow
 def test_aces_camera_session_on_the_fhw_map_is_never_tracking():
     """The issue's case: frames 10-11 were `tracking` (confidence 0.95) 44-46 m off."""
-    from shared_data import SHARED_DATA
+    from benchmarks.shared_data import SHARED_DATA
     from zfloc_stream.io.datasets.mcap import session_sequence
     from zfloc_stream.plans.loading import load_floorplan
 

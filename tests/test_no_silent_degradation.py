@@ -10,7 +10,8 @@ import sys
 
 import numpy as np
 import pytest
-from session_helpers import camera_frames, laser_frames, record_laser_session, write_fake_session
+from benchmarks.inputs.session_frames import camera_frames, laser_frames
+from session_helpers import record_laser_session, write_fake_session
 
 from zfloc_stream.io import session as S_pkg
 from zfloc_stream.settings.loading import load_settings

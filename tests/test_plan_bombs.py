@@ -2,14 +2,14 @@
 the work (named with the setting that raises it), large honest plans load, nothing is
 dropped or read wrong without a word, and every refusal is one error line (exit 2).
 
-Each family is generated small (tests/plan_bombs.py); benchmarks/fuzz_inputs.py runs
+Each family is generated small (benchmarks/inputs/plan_bombs.py); benchmarks/evaluation/fuzz_run.py runs
 them at the issue's sizes with a memory budget."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from plan_bombs import (
+from benchmarks.inputs.plan_bombs import (
     BILLION_LAUGHS,
     dxf_collinear,
     dxf_insert_tree,
@@ -131,7 +131,7 @@ def test_geojson_crs_is_not_ignored(tmp_path):
 
 
 def test_dxf_declared_mm_but_drawn_in_metres_is_refused_naming_scale(tmp_path):
-    from fuzz_inputs import BOX, write_dxf
+    from benchmarks.inputs.hostile_plans import BOX, write_dxf
 
     path = write_dxf(tmp_path / "mm.dxf", [((30 * a, 20 * b), (30 * c, 20 * d)) for (a, b), (c, d) in
                                            (((0, 0), (1, 0)), ((1, 0), (1, 1)), ((1, 1), (0, 1)), ((0, 1), (0, 0)))], 4)
@@ -147,7 +147,7 @@ def test_plan_without_walls_is_refused(tmp_path, capsys):
 
 
 def _fuzz(seed: int, n: int, d, big: bool) -> dict[str, int]:
-    from plan_bombs import fuzz_bomb_plan
+    from benchmarks.inputs.plan_bombs import fuzz_bomb_plan
 
     rng = np.random.default_rng(seed)
     outcomes = {"loaded": 0, "refused": 0}
@@ -170,7 +170,7 @@ def test_fuzzed_bomb_families_load_or_fail_in_one_line(tmp_path):
 
 @pytest.mark.slow
 def test_fuzzed_bomb_families_at_the_issues_sizes(tmp_path):
-    """Up to 100,000 segments, 8 levels of INSERTs (benchmarks/fuzz_inputs.py --bombs runs
+    """Up to 100,000 segments, 8 levels of INSERTs (benchmarks/evaluation/fuzz_run.py --bombs runs
     more with a memory budget and an alarm per case)."""
     outcomes = _fuzz(4400, 60, tmp_path, big=True)
     assert outcomes["loaded"] and outcomes["refused"], outcomes

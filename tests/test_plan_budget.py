@@ -80,7 +80,7 @@ def test_vector_plan_over_max_cells_is_drawn_coarser_with_a_warning(tmp_path):
     """A drawing over floorplan.max_cells is drawn at once on coarser cells (no full-size
     raster); its lines stay the drawing's own. A 300 m drawing (36.5 M cells at 0.05 m) is
     under datasets.vector_floorplan.max_cells by default, so it loads."""
-    from fuzz_inputs import BOX, write_dxf
+    from benchmarks.inputs.hostile_plans import BOX, write_dxf
     from zfloc_stream.plans.vector import load_vector_floorplan
 
     path = write_dxf(tmp_path / "room.dxf", BOX + [((0, 4), (6, 4))])  # 10 x 8 m + 1 m margins: 240 x 200 cells

@@ -1,8 +1,5 @@
-"""A raster map redrawn as an architect's plan (benchmarks/plan_drawing.py): the walls become straight
+"""A raster map redrawn as an architect's plan (benchmarks/evaluation/plan_drawing.py): the walls become straight
 segments, clutter goes, doors stay open, and the DXF loads through the vector path."""
-
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
@@ -11,12 +8,8 @@ from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.runtime.rng import make_rng
 from zfloc_stream.plans.vector import load_vector_floorplan
 
-# plan_drawing.py is the benchmark's (eval_real.py --plan-style), not the package's: loaded by
-# path, so the benchmarks folder never goes on sys.path (its fuzz_inputs.py would shadow ours)
-_SPEC = importlib.util.spec_from_file_location("plan_drawing", Path(__file__).resolve().parents[1] / "benchmarks" / "plan_drawing.py")
-plan_drawing = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(plan_drawing)
-draw_plan, two_faces, write_plan_dxf = plan_drawing.draw_plan, plan_drawing.two_faces, plan_drawing.write_plan_dxf
+# plan_drawing is the evaluation's (eval_real.py --plan-style), not the package's
+from benchmarks.evaluation.plan_drawing import draw_plan, two_faces, write_plan_dxf
 
 RES = 0.05
 

@@ -3,14 +3,11 @@ comes from the first round on, a track is kept through parts the map lacks, and 
 correlative seeding finds what the minimal samples miss on a map built from scans."""
 
 import csv
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.estimation.correlative import correlative_models, correlative_search
@@ -111,14 +108,13 @@ def _rot(theta: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-EVAL_REAL = Path(__file__).resolve().parents[1] / "benchmarks" / "eval_real.py"
 INTEL_LOG = SHARED_DATA / "carmen" / "intel-corrected.log.gz"
 
 
 @pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")
 def test_real_building_benchmark_ci_subset(monkeypatch):
-    """One held-out Intel window through benchmarks/eval_real.py, online and reference
-    (the full table: python benchmarks/eval_real.py)."""
+    """One held-out Intel window through benchmarks/evaluation/eval_real.py, online and
+    reference (the full table: python -m benchmarks.evaluation.eval_real)."""
     eval_real = _eval_real()
     monkeypatch.setattr(eval_real, "DATA", INTEL_LOG.parent)  # the benchmark looks beside the checkout only
     row = eval_real.run_window("intel", 445, 20, 0, [], True)
@@ -128,13 +124,9 @@ def test_real_building_benchmark_ci_subset(monkeypatch):
 
 
 def _eval_real():
-    import sys
+    from benchmarks.evaluation import eval_real
 
-    spec = importlib.util.spec_from_file_location("eval_real", EVAL_REAL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("eval_real", module)  # its dataclass looks its module up by name
-    spec.loader.exec_module(module)
-    return module
+    return eval_real
 
 
 def test_eval_real_status_table_counts_tracking_frames_off_by_1m_or_more():

@@ -146,12 +146,8 @@ def test_a_large_scatter_costs_its_pairs_not_n_squared():
 def test_line_only_dxf_fast_reader_equals_ezdxf(tmp_path, monkeypatch):
     """plan_readers._dxf_lines_only (the group codes read directly) gives ezdxf's geometry
     for a LINE-only drawing, in every unit, and hands anything else to ezdxf."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from fuzz_inputs import write_dxf
-    from plan_bombs import dxf_pieces
+    from benchmarks.inputs.hostile_plans import write_dxf
+    from benchmarks.inputs.plan_bombs import dxf_pieces
 
     from zfloc_stream.plans import readers as plan_readers
 

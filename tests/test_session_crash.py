@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from session_helpers import camera_frames
+from benchmarks.inputs.session_frames import camera_frames
 
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.io.session import read_session
@@ -24,8 +24,9 @@ MAX_LOST = CHUNK_FRAMES + PENDING_BATCHES // 2
 CHILD = textwrap.dedent(
     """
     import sys, time
-    sys.path.insert(0, {tests!r})
-    from session_helpers import camera_frames, fake_estimate
+    sys.path[:0] = [{tests!r}, {root!r}]  # session_helpers; benchmarks.inputs
+    from benchmarks.inputs.session_frames import camera_frames
+    from session_helpers import fake_estimate
     from zfloc_stream.settings.loading import load_settings
     from zfloc_stream.io.session import SessionWriter
 
@@ -47,7 +48,7 @@ CHILD = textwrap.dedent(
 @pytest.fixture(scope="module")
 def killed_session(tmp_path_factory):
     path = tmp_path_factory.mktemp("crash") / "killed.mcap"
-    code = CHILD.format(tests=str(Path(__file__).parent), chunk=CHUNK_FRAMES, pending=PENDING_BATCHES, path=str(path))
+    code = CHILD.format(tests=str(Path(__file__).parent), root=str(Path(__file__).parents[1]), chunk=CHUNK_FRAMES, pending=PENDING_BATCHES, path=str(path))
     child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     written = -1
     try:
@@ -138,7 +139,7 @@ def test_default_chunking_loses_no_finished_frame(tmp_path, background):
     estimate: a kill loses no finished frame, only one still queued for the background
     writer (at most max_pending_batches / 2 frames; none when writing inline)."""
     path = tmp_path / f"default-{background}.mcap"
-    code = CHILD.format(tests=str(Path(__file__).parent), chunk=1, pending=PENDING_BATCHES, path=str(path))
+    code = CHILD.format(tests=str(Path(__file__).parent), root=str(Path(__file__).parents[1]), chunk=1, pending=PENDING_BATCHES, path=str(path))
     code = code.replace('"logging.chunk_size=100000000",', f'"logging.chunk_size=100000000", "logging.background={background}",')
     child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     written = -1

@@ -3,7 +3,8 @@ names the file (or the damage changed only values and the file still reads)."""
 
 import numpy as np
 import pytest
-from session_helpers import camera_frames, laser_frames, write_fake_session
+from benchmarks.inputs.session_frames import camera_frames, laser_frames
+from session_helpers import write_fake_session
 
 from zfloc_stream.settings.loading import load_settings
 from zfloc_stream.errors import SessionLogError
@@ -101,7 +102,7 @@ def test_laser_session_flips(tmp_path):
             assert str(path) in str(err)
 
 
-# --- issue 44 families: valid-but-odd and hostile sessions (tests/session_hostile.py) ----------
+# --- issue 44 families: valid-but-odd and hostile sessions (benchmarks/inputs/hostile_sessions.py) --
 def _read_hostile(path, salvage: bool) -> int:
     session = read_session(path, salvage=salvage)
     n = sum(1 for _ in session.records())
@@ -114,7 +115,7 @@ def _read_hostile(path, salvage: bool) -> int:
 def _hostile_cases(n_cases: int, seed: int, tmp_path) -> dict:
     import warnings
 
-    from session_hostile import hostile_session
+    from benchmarks.inputs.hostile_sessions import hostile_session
 
     rng = np.random.default_rng(seed)
     path = tmp_path / "hostile.mcap"

@@ -7,8 +7,9 @@ import warnings
 import numpy as np
 import pytest
 from mcap.writer import Writer
-from session_helpers import camera_frames, laser_frames, write_fake_session
-from session_hostile import ORDERS, frame_messages, ordered, write_messages
+from benchmarks.inputs.session_frames import camera_frames, laser_frames
+from session_helpers import write_fake_session
+from benchmarks.inputs.hostile_sessions import ORDERS, frame_messages, ordered, write_messages
 
 from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import SessionLogError
@@ -83,7 +84,7 @@ def test_a_file_without_chunk_index_out_of_order_warns(tmp_path):
     with open(path, "wb") as f:  # messages outside chunks: no index to read them in order by
         w = Writer(f, use_chunking=False)
         w.start()
-        from session_hostile import CLASSES
+        from benchmarks.inputs.hostile_sessions import CLASSES
         from mcap_protobuf.schema import build_file_descriptor_set
 
         ids = {}
@@ -244,7 +245,7 @@ def test_huge_odometry_is_a_frame_error_at_the_api_and_a_dropped_frame_in_a_sess
 
 
 def test_times_beyond_2_63_ns_are_one_error_line(tmp_path):
-    from session_hostile import with_timestamps
+    from benchmarks.inputs.hostile_sessions import with_timestamps
 
     write_messages(tmp_path / "late.mcap", frame_messages(with_timestamps(laser_frames(4, beams=20), t0=9.3e9)))
     session = read_session(tmp_path / "late.mcap")
@@ -266,7 +267,7 @@ def test_cli_on_huge_odometry_and_late_times_warns_or_fails_in_one_line(tmp_path
     import subprocess
     import sys
 
-    from session_hostile import with_timestamps
+    from benchmarks.inputs.hostile_sessions import with_timestamps
 
     from zfloc_stream.sim import build_scene
 
@@ -309,7 +310,7 @@ def _bag_frames(path, settings=None):
 
 @pytest.mark.parametrize("order", ["topic", "shuffled"])
 def test_bags_out_of_log_time_order_read_the_same_frames(tmp_path, order):
-    from session_hostile import rewrite
+    from benchmarks.inputs.hostile_sessions import rewrite
 
     path, _ = _bag(tmp_path)
     want, _ = _bag_frames(path)
@@ -321,7 +322,7 @@ def test_bags_out_of_log_time_order_read_the_same_frames(tmp_path, order):
 
 
 def test_a_shuffled_bag_beyond_the_reorder_limit_is_refused(tmp_path, monkeypatch):
-    from session_hostile import rewrite
+    from benchmarks.inputs.hostile_sessions import rewrite
 
     import zfloc_stream.io.datasets.ros2 as ros2
     from zfloc_stream.errors import InputError

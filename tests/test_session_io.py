@@ -9,9 +9,10 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 from mcap_protobuf.decoder import DecoderFactory
 from mcap_protobuf.schema import build_file_descriptor_set
-from session_helpers import camera_frames, fake_estimate, laser_frames, write_fake_session
+from benchmarks.inputs.session_frames import camera_frames, laser_frames
+from session_helpers import fake_estimate, write_fake_session
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.errors import SessionLogError

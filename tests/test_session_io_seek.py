@@ -13,9 +13,10 @@ from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.writer import Writer
 from mcap_protobuf.schema import build_file_descriptor_set
-from session_helpers import camera_frames, laser_frames, write_fake_session
+from benchmarks.inputs.session_frames import camera_frames, laser_frames
+from session_helpers import write_fake_session
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.settings.loading import Settings, load_settings
 from zfloc_stream.io.datasets.mcap import session_sequence

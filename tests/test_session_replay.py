@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 from session_helpers import record_laser_session
 
-from shared_data import SHARED_DATA
+from benchmarks.shared_data import SHARED_DATA
 
 from zfloc_stream.io.session import read_session
 from zfloc_stream.io.session import schemas as S

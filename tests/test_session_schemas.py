@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from session_helpers import fake_estimate, rotation
+from benchmarks.inputs.session_frames import rotation
+from session_helpers import fake_estimate
 
 from zfloc_stream.errors import SessionLogError
 from zfloc_stream.io.session import schemas as S

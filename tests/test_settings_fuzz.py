@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from pydantic import BaseModel
 
-from fuzz_inputs import hostile_setting
+from benchmarks.inputs.hostile_plans import hostile_setting
 
 from zfloc_stream.settings.loading import Settings, allowed_range, load_settings
 from zfloc_stream.errors import ConfigError, FloorplanError

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from frontend_scene import (
+from benchmarks.inputs.box_world import (
     camera_pose,
     camera_sequence,
     distance_to_true_walls,

@@ -13,7 +13,7 @@ scale) and re-counts the matched points (thinned to half a cell) at the refined 
 
 Two users: the estimator seeds its global rounds at fixed or prior scale with
 correlative_models (estimation/model_generation.py, estimator.correlative), and
-benchmarks/eval_real.py measures the online localizer against correlative_search, what an
+benchmarks/evaluation/eval_real.py measures the online localizer against correlative_search, what an
 offline, exhaustive search reaches on the same points.
 """
 from __future__ import annotations

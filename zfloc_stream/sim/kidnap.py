@@ -4,7 +4,7 @@ further along, at a place that looks like the one it left.
 
 `corridor_kidnaps` gives the true walk and the cuts; the caller simulates the walk (camera
 or laser) and plays the frames spliced at the cuts with the odometry standing still across
-each (benchmarks/eval_scenes.py --kidnap, tests/test_localizer.py)."""
+each (benchmarks/evaluation/eval_scenes.py --kidnap, tests/test_localizer.py)."""
 
 from __future__ import annotations
 

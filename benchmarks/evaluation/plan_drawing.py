@@ -12,7 +12,7 @@ the parallel duplicates a thick wall gives are merged (vector_floorplan.merge_co
 primitives.deduplicate_lines) and pieces still shorter than `min_length` dropped. Walls the
 fit misses stay missing: a plan drawn from a map is an imperfect plan, as real ones are.
 
-Used by benchmarks/eval_real.py --plan-style to localize against plans of real buildings
+Used by benchmarks/evaluation/eval_real.py --plan-style to localize against plans of real buildings
 (the Carmen logs' held-out maps) instead of the maps themselves; nothing in the package
 needs it, so it lives beside its one user (tests/test_plan_drawing.py loads it by path).
 """

@@ -1,6 +1,7 @@
 """Generators of the plan families issue 44 found breaking the vector loaders (memory and
 time bombs, silent drops, wrong units), small by default; the tests
-(tests/test_plan_bombs.py) and benchmarks/fuzz_inputs.py draw from them with seeds."""
+(tests/test_plan_bombs.py), benchmarks/evaluation/fuzz_run.py and bench_plan_load.py --honest
+draw from them with seeds."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
-from fuzz_inputs import GEO_BOX, collection, feature, write_dxf, write_svg
+from benchmarks.inputs.hostile_plans import GEO_BOX, collection, feature, write_dxf, write_svg
 
 
 def dxf_insert_tree(path: Path, levels: int, fanout: int = 10) -> Path:
@@ -173,7 +174,7 @@ def fuzz_bomb_plan(rng: np.random.Generator, d: Path, case: int, big: bool = Fal
         crs = None if rng.random() < 0.5 else ("EPSG:2263", "urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:32633", 5)[int(rng.integers(4))]
         return geojson_with(p.with_suffix(".geojson"), coordinate=value, crs=crs), ({"scale": 0.3048} if rng.random() < 0.3 else {})
     # family 11: a room in a declared unit, drawn in another
-    from fuzz_inputs import BOX
+    from benchmarks.inputs.hostile_plans import BOX
 
     factor = 10.0 ** int(rng.integers(-4, 4))
     unit = int(rng.choice([1, 2, 4, 5, 6, 14]))

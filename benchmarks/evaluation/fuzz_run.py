@@ -1,11 +1,11 @@
 """The large fuzz run over what a user hands the package: floorplans (ROS YAML + PNG, plain
 images, DXF, SVG, GeoJSON) and settings (`--set key=text` as typed), with the seeded
-generators of tests/fuzz_inputs.py (the CI-sized runs: tests/test_floorplan_fuzz.py,
+generators of benchmarks/inputs/hostile_plans.py (the CI-sized runs: tests/test_floorplan_fuzz.py,
 tests/test_settings_fuzz.py).
 
-    .venv/bin/python benchmarks/fuzz_inputs.py                            # 1,200 + 1,200 cases
-    .venv/bin/python benchmarks/fuzz_inputs.py --plans 3000 --settings 3000 --seed 7
-    .venv/bin/python benchmarks/fuzz_inputs.py --run-accepted 20          # + accepted settings run a short scene
+    python -m benchmarks.evaluation.fuzz_run                            # 1,200 + 1,200 cases
+    python -m benchmarks.evaluation.fuzz_run --plans 3000 --settings 3000 --seed 7
+    python -m benchmarks.evaluation.fuzz_run --run-accepted 20          # + accepted settings run a short scene
 
 Every case must load or be refused by one ZflocError line; anything else is a traceback
 (counted, the first ones printed). Each case runs under an alarm (--timeout s): a case
@@ -28,15 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from zfloc_stream.settings.loading import Settings, load_settings
+from zfloc_stream.errors import ZflocError
+from zfloc_stream.plans.floorplan import Floorplan
+from zfloc_stream.plans.loading import load_floorplan
+from zfloc_stream.plans.vector import VECTOR_SUFFIXES, load_vector_floorplan
 
-from fuzz_inputs import fuzz_floorplan, hostile_setting  # noqa: E402
-
-from zfloc_stream.settings.loading import Settings, load_settings  # noqa: E402
-from zfloc_stream.errors import ZflocError  # noqa: E402
-from zfloc_stream.plans.floorplan import Floorplan  # noqa: E402
-from zfloc_stream.plans.loading import load_floorplan  # noqa: E402
-from zfloc_stream.plans.vector import VECTOR_SUFFIXES, load_vector_floorplan  # noqa: E402
+from benchmarks.inputs.hostile_plans import fuzz_floorplan, hostile_setting
 
 
 class Hang(Exception):

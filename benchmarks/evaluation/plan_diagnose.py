@@ -11,9 +11,9 @@ For each window (laser, held-out map drawn as a plan; the raster map beside it):
   best, not reported);
 - primitives: lines of the plan vs the raster map, BEV lines.
 
-    python benchmarks/plan_diagnose.py --rows rows.json            # the failures of a --json run
-    python benchmarks/plan_diagnose.py --window intel/100/50 --plan-style two-face
-    python benchmarks/plan_diagnose.py --rows rows.json --set estimator.scoring.violation_weight=0
+    python -m benchmarks.evaluation.plan_diagnose --rows rows.json            # the failures of a --json run
+    python -m benchmarks.evaluation.plan_diagnose --window intel/100/50 --plan-style two-face
+    python -m benchmarks.evaluation.plan_diagnose --rows rows.json --set estimator.scoring.violation_weight=0
 """
 
 from __future__ import annotations
@@ -25,14 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from zfloc_stream.estimation.results import alignment_of, model_rows
+from zfloc_stream.estimation.field_fit import refine_batch
+from zfloc_stream.estimation.scoring import floorplan_scorer, score_hypotheses
+from zfloc_stream.geometry.sim2 import Sim2
 
-import eval_real  # noqa: E402  (benchmarks/ is not a package)
-
-from zfloc_stream.estimation.results import alignment_of, model_rows  # noqa: E402
-from zfloc_stream.estimation.field_fit import refine_batch  # noqa: E402
-from zfloc_stream.estimation.scoring import floorplan_scorer, score_hypotheses  # noqa: E402
-from zfloc_stream.geometry.sim2 import Sim2  # noqa: E402
+from benchmarks.evaluation import eval_real
 
 
 def true_alignment(plane_poses, truth) -> Sim2:

@@ -1,7 +1,7 @@
 """Session files written the way another tool (or an attacker) might: messages grouped by
 topic or shuffled in the file, depth in millimetres as float32 or mislabelled, lens
-distortion, huge log times and poses. Used by tests/test_session_hostile.py and the
-session fuzz test (tests/test_session_fuzz.py)."""
+distortion, huge log times and poses. Used by tests/test_session_hostile.py, the
+session fuzz test (tests/test_session_fuzz.py) and benchmarks/bench_session_order.py."""
 
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def hostile_session(rng: np.random.Generator, path, small: bool = True) -> str:
     """One seeded session of the issue-44 families, written to path; returns what it is.
     Families: message order, depth units and encodings, lens distortion, huge or
     non-finite poses, times near and beyond 2^63 ns, a damaged chunk; mixed at random."""
-    from session_helpers import camera_frames, laser_frames
+    from benchmarks.inputs.session_frames import camera_frames, laser_frames
 
     n = int(rng.integers(3, 12))
     laser = rng.random() < 0.3

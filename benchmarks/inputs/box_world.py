@@ -1,4 +1,5 @@
-"""A tiny box-world depth + label renderer for the front-end tests (independent of sim/).
+"""A tiny box-world depth + label renderer for the front-end tests and
+benchmarks/bench_fusion.py (independent of sim/).
 
 World frame: z up. A scene is a list of axis-aligned boxes, each with one label for all
 its faces. Camera poses follow OpenCV axes; `odom_from_world` re-expresses them in an

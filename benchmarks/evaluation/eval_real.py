@@ -25,15 +25,15 @@ spread evenly along the log (they may overlap on short logs). Each window:
   windows cover < 0.5: those areas were walked only once); the last table splits the
   success rates by it (camera windows walk the same trajectory: the same coverage).
 
-    python benchmarks/eval_real.py                         # 5 logs x 5 lengths x 8 windows
-    python benchmarks/eval_real.py --logs intel --lengths 20,50 --windows 3 --workers 2
-    python benchmarks/eval_real.py --no-reference --set tracking.weight_gain=10
-    python benchmarks/eval_real.py --camera --windows 3           # camera rows too
-    python benchmarks/eval_real.py --drift-free --logs belgioioso,orebro   # what the maps allow
-    python benchmarks/eval_real.py --plan-style --camera --windows 2   # against the maps drawn as plans
-    python benchmarks/eval_real.py --plan-style two-face                # plans with both faces of each wall
-    python benchmarks/eval_real.py --plan-style two-face-centred       # both faces 0.1 m about each seen wall
-    python benchmarks/eval_real.py --wrong-map --lengths 20,50 --windows 1   # every input on every OTHER building's map (wrong_map.py)
+    python -m benchmarks.evaluation.eval_real                         # 5 logs x 5 lengths x 8 windows
+    python -m benchmarks.evaluation.eval_real --logs intel --lengths 20,50 --windows 3 --workers 2
+    python -m benchmarks.evaluation.eval_real --no-reference --set tracking.weight_gain=10
+    python -m benchmarks.evaluation.eval_real --camera --windows 3           # camera rows too
+    python -m benchmarks.evaluation.eval_real --drift-free --logs belgioioso,orebro   # what the maps allow
+    python -m benchmarks.evaluation.eval_real --plan-style --camera --windows 2   # against the maps drawn as plans
+    python -m benchmarks.evaluation.eval_real --plan-style two-face                # plans with both faces of each wall
+    python -m benchmarks.evaluation.eval_real --plan-style two-face-centred       # both faces 0.1 m about each seen wall
+    python -m benchmarks.evaluation.eval_real --wrong-map --lengths 20,50 --windows 1   # every input on every OTHER building's map (wrong_map.py)
 """
 
 from __future__ import annotations
@@ -68,9 +68,9 @@ from zfloc_stream.metrics import is_success, position_errors
 from zfloc_stream.plans.vector import load_vector_floorplan
 from zfloc_stream.geometry.sim2 import Sim2
 
-# ../shared/data beside the repository, else /work/shared/data (a clone elsewhere, as CI's)
-_BESIDE = Path(__file__).resolve().parents[2] / "shared" / "data"
-DATA = (_BESIDE if _BESIDE.is_dir() else Path("/work/shared/data")) / "carmen"
+from benchmarks.shared_data import SHARED_DATA
+
+DATA = SHARED_DATA / "carmen"
 LOGS = ["intel", "aces", "belgioioso", "fhw", "orebro"]
 LENGTHS = [15, 20, 35, 50, 100]
 COVERAGE_DISTANCE = 0.3  # metres: estimator.correlative.tolerance, "near a wall"
@@ -394,11 +394,9 @@ PLAN_COVERAGE = 0.7  # windows whose plan covers at least this share of their hi
 
 def plan_of(floorplan, settings, style: str, log: str, start: int, stop: int):
     """The held-out map of window [start, stop) of a log redrawn as a plan
-    (benchmarks/plan_drawing.py), written as a DXF in metres and loaded through the vector
+    (benchmarks/evaluation/plan_drawing.py), written as a DXF in metres and loaded through the vector
     path, as a user's `run --floorplan plan.dxf`."""
-    # a sibling module of the benchmarks, found as wrong_map is (the script's folder is on
-    # sys.path); imported here so a test that loads this file by path does not need it
-    from plan_drawing import draw_plan, two_faces, write_plan_dxf
+    from benchmarks.evaluation.plan_drawing import draw_plan, two_faces, write_plan_dxf
 
     segments = draw_plan(floorplan)
     if style == "two-face":
@@ -696,7 +694,7 @@ def main(argv=None) -> int:
                     jobs.append((log, start, length, args.seed, args.set, not args.no_reference, camera))
     t0 = time.perf_counter()
     if args.wrong_map:
-        import wrong_map
+        from benchmarks.evaluation import wrong_map
 
         runs = [(wrong_map.session_row, (s, m, args.seed, args.set)) for s in wrong_map.sessions() for m in wrong_map.sessions()
                 if s != m and args.camera] if args.camera else []

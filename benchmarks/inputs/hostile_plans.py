@@ -1,5 +1,5 @@
 """Hostile floorplans for the loader fuzz tests (tests/test_floorplan_fuzz.py) and the
-larger run in benchmarks/fuzz_inputs.py: the inputs issue 29 found breaking the loaders,
+larger run in benchmarks/evaluation/fuzz_run.py: the inputs issue 29 found breaking the loaders,
 and a seeded generator of damaged plans in every format (ROS YAML + PNG, plain image,
 DXF, SVG, GeoJSON)."""
 

@@ -5,15 +5,15 @@ Because the localizer is causal, the estimate at frame L-1 of that run is exactl
 run on the first L frames alone would report, so SR at length L is read off the prefix:
 success = all of frames L-10 .. L-1 within 1 m (F3Loc protocol, zfloc_stream.metrics).
 
-    python benchmarks/eval_scenes.py --scenes apartment --seeds 20
-    python benchmarks/eval_scenes.py --scenes rooms,apartment,office,symmetric,hall,offices --seeds 20 --workers 2
+    python -m benchmarks.evaluation.eval_scenes --scenes apartment --seeds 20
+    python -m benchmarks.evaluation.eval_scenes --scenes rooms,apartment,office,symmetric,hall,offices --seeds 20 --workers 2
 
 --kidnap (issue 43): the repetitive building ('offices') walked along its corridor and back,
 carried off twice whole offices (10-20 m) along the corridor to a place that looks like the
 one it left, the odometry standing still across each cut (sim/kidnap.py); per run the frames
 until the pose is `tracking` within 1 m again, and the `tracking` frames 1 m or more off.
 
-    python benchmarks/eval_scenes.py --kidnap --sensor camera,laser --seeds 10 --workers 2
+    python -m benchmarks.evaluation.eval_scenes --kidnap --sensor camera,laser --seeds 10 --workers 2
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from zfloc_stream.sim import build_scene
 from zfloc_stream.sim.kidnap import corridor_kidnaps, played
 from zfloc_stream.sim.simulator import LaserSimSettings, SimSettings, simulate, simulate_laser
 
-from eval_real import walk_metrics
+from benchmarks.evaluation.eval_real import walk_metrics
 
 
 def run_one(scene_name: str, seed: int, n_frames: int, overrides: list[str]) -> dict:

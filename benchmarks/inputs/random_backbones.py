@@ -1,4 +1,5 @@
-"""Tiny pretrained-network stand-ins and RGB sessions for the backbone tests.
+"""Tiny pretrained-network stand-ins and RGB sessions for the backbone tests and
+benchmarks/bench_backbones.py.
 
 The models are the real architectures (Depth Anything on a DINOv2 backbone, SegFormer)
 built from their config classes at toy sizes with seeded random weights, saved to a folder

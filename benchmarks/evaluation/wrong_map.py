@@ -18,7 +18,9 @@ from zfloc_stream.io.datasets.carmen import load_log
 from zfloc_stream.stream.localizer import Localizer
 from zfloc_stream.plans.map_from_log import map_from_log
 
-SESSIONS = Path(__file__).resolve().parents[2] / "shared" / "data" / "sessions"
+from benchmarks.shared_data import SHARED_DATA
+
+SESSIONS = SHARED_DATA / "sessions"
 
 
 def _run(floorplan, frames, settings) -> dict:
@@ -48,7 +50,7 @@ def _whole_map(log: str, data: Path):
 
 
 def laser_row(log: str, start: int, length: int, map_of: str, seed: int, overrides: list[str], data: Path) -> dict:
-    from eval_real import laser_window  # the same frames as the right-map windows
+    from benchmarks.evaluation.eval_real import laser_window  # the same frames as the right-map windows
 
     settings, _, frames = laser_window(log, start, length, overrides, seed)
     return {"kind": f"laser #{length}", "input": f"{log}@{start}", "map": map_of, **_run(_whole_map(map_of, data), frames, settings)}

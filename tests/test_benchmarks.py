@@ -1,0 +1,106 @@
+"""The benchmarks' harness (benchmarks/harness.py): every stage benchmark runs at its smallest
+size (--quick) and writes valid JSON rows after the machine header; no file under
+benchmarks/ reaches into tests/ (the inputs both use live once, in benchmarks/inputs/)."""
+
+import ast
+import importlib
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks import harness
+from benchmarks.shared_data import SHARED_DATA
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ROOT / "benchmarks"
+# the stage benchmarks: bench_*.py, and profile_round (a round's stages on real data)
+STAGE = sorted(p.stem for p in BENCHMARKS.glob("bench_*.py")) + ["profile_round"]
+CARMEN = SHARED_DATA / "carmen"
+NEEDS = {  # benchmark: (what it needs, whether it is there)
+    "bench_scan_match": ("the shared Carmen logs", (CARMEN / "intel-corrected.log.gz").is_file()),
+    "bench_scoring": ("the shared Carmen logs", (CARMEN / "aces-corrected.log.gz").is_file()),
+    "profile_round": ("the shared Carmen logs", (CARMEN / "fhw-corrected.log.gz").is_file()),
+}
+
+
+def read_rows(path: Path) -> tuple[dict, list[dict]]:
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert lines and all(isinstance(x, dict) for x in lines)
+    return lines[0], lines[1:]
+
+
+def test_every_stage_benchmark_is_listed():
+    assert len(STAGE) >= 15 and "bench_round" in STAGE and "bench_localize" in STAGE
+
+
+@pytest.mark.parametrize("name", STAGE)
+def test_stage_benchmark_quick_run_writes_json_rows(name, tmp_path, capsys, monkeypatch):
+    needs, present = NEEDS.get(name, ("", True))
+    if not present:
+        pytest.skip(f"{name} needs {needs}")
+    if name == "bench_backbones":
+        pytest.importorskip("transformers")
+    monkeypatch.chdir(ROOT)  # the benchmarks' child processes run `python -m benchmarks.…` from the root
+    out = tmp_path / "rows.jsonl"
+    module = importlib.import_module(f"benchmarks.{name}")
+    assert module.main(["--quick", "--json", str(out)]) == 0
+    header, rows = read_rows(out)
+    assert header["benchmark"] == name.removeprefix("bench_")
+    assert {"python", "numpy", "cpus", "commit", "date"} <= header["header"].keys()
+    assert rows, f"{name} --quick wrote no rows"
+    assert all(r["benchmark"] == header["benchmark"] and "table" in r for r in rows)
+    printed = capsys.readouterr().out
+    assert printed.count(f"numpy {header['header']['numpy']}") == 1  # the header, once
+    assert "|---|" in printed  # a markdown table
+
+
+def test_harness_table_and_json(tmp_path, capsys):
+    import numpy as np
+
+    bench = harness.Benchmark("demo", "a demo", seed=3, repeat=2, frames=[5, 6], workers=1, settings=True)
+    args = bench.parse(["--json", str(tmp_path / "rows.jsonl"), "--repeats", "4", "--frames", "7", "8", "--set", "a.b=1"])
+    assert (args.seed, args.repeat, args.frames, args.workers, args.set, args.quick) == (3, 4, [7, 8], 1, ["a.b=1"], False)
+    table = bench.table(["case", ("ms", "time ms")], title="stage")
+    table.add(case="x", ms=np.float64(12.345), extra=np.int64(2))
+    table.add(case="y", ms=None)
+    assert bench.done() == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[-6:] == ["### stage", "", "| case | time ms |", "|---|---|", "| x | 12.35 |", "| y |  |"]
+    header, rows = read_rows(tmp_path / "rows.jsonl")
+    assert header["argv"][-1] == "a.b=1"
+    assert rows == [{"benchmark": "demo", "table": "stage", "case": "x", "ms": 12.345, "extra": 2},
+                    {"benchmark": "demo", "table": "stage", "case": "y", "ms": None}]
+
+
+def test_cells_keep_three_significant_digits():
+    assert [harness.cell(v) for v in (1234.5, 123.45, 12.345, 1.2345, 0.012345, 0.0, True, None, 7)] == [
+        "1234", "123.5", "12.35", "1.234", "0.0123", "0", "yes", "", "7"]
+
+
+def reaches_into_tests(folder: Path) -> list[str]:
+    """Imports of a module of tests/ and sys.path edits in the Python files under folder."""
+    test_modules = {p.stem for p in (ROOT / "tests").glob("*.py")} | {"tests", "conftest"}
+    offenders = []
+    for path in sorted(folder.rglob("*.py")):
+        where = path.relative_to(folder)
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            offenders += [f"{where}:{node.lineno}: import {n}" for n in names if n.split(".")[0] in test_modules]
+            if isinstance(node, ast.Attribute) and node.attr == "path" and getattr(node.value, "id", None) == "sys":
+                offenders.append(f"{where}:{node.lineno}: sys.path")
+    return offenders
+
+
+def test_nothing_under_benchmarks_imports_tests():
+    """No sys.path edit and no import of a module of tests/ anywhere under benchmarks/."""
+    assert reaches_into_tests(BENCHMARKS) == []
+
+
+def test_the_check_catches_an_import_from_tests(tmp_path):
+    (tmp_path / "bench_bad.py").write_text("import sys\nsys.path.insert(0, 'tests')\nfrom session_helpers import fake_estimate\n")
+    assert sorted(reaches_into_tests(tmp_path)) == ["bench_bad.py:2: sys.path", "bench_bad.py:3: import session_helpers"]
