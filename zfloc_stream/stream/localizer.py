@@ -31,7 +31,7 @@ import numpy as np
 from ..backbones.perception import Perception, needs_backbones
 from ..settings.loading import Settings
 from ..errors import UsageError, ZflocError
-from ..estimate import Alternative, Estimate
+from ..estimate import Alternative, Estimate, Status
 from ..estimation.local_refinement import LocalRefinement
 from ..estimation.scoring import scoring_kernels
 from ..plans.floorplan import Floorplan
@@ -45,6 +45,7 @@ from ..prior import Prior, PriorWatch
 from .scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from ..geometry.sim2 import Sim2
 from ..tracking.filter_bank import HypothesisTracker, Mode
+from ..tracking.status import Recovery, Rule
 
 
 class Localizer:
@@ -109,6 +110,7 @@ class Localizer:
         self._audit_mode: int | None = None
         self._adopted_at = -1  # frame whose kidnap round was adopted last
         self._preview: HypothesisTracker | None = None  # reported while the tracker has no pose (_show_preview)
+        self.last_rule: Rule | None = None  # why the latest estimate has its status (tracking/status.py)
         self.jumps = OdometryJumpWatch(self.settings)  # odometry steps the sensor cannot have made (odometry_jump.py)
         self.odometry_jumps = 0  # of them, found: each restarted the map and the hypotheses
         self._jumped_at = -1  # frame of the latest odometry jump: rounds started before it are dropped
@@ -155,7 +157,7 @@ class Localizer:
             self._recent_cameras.append(plane_pose[:2])
             self._recent_contradiction.append(self.bev.last_contradiction)
             # only a tracked alignment is watched, as reported (the local refinement's)
-            tracked = self.tracker.best if self.tracker.status == "tracking" else None
+            tracked = self.tracker.best if self.tracker.status is Status.TRACKING else None
             if self.monitor.wants_global_search(None if tracked is None else tracked.id,
                                                 None if tracked is None else self.local.alignment_of_mode(tracked),
                                                 self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
@@ -526,21 +528,16 @@ class Localizer:
             pose = np.array(alignment.apply_pose(*plane_pose))
             cov = shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
-        # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
+        # the frame's own evidence (its hits, the pose's step) can withhold `tracking`; so can the
+        # run of frames the monitor saw, until the kidnap test ends, and an odometry step the
+        # sensor cannot have made (odometry_jump.py); one decision (tracking/status.py)
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
-        if (self._kidnap is not None or suspect) and alignment is not None:
-            # the run of frames the monitor saw contradicts the pose until the test ends; an
-            # odometry step the sensor cannot have made (odometry_jump.py) contradicts it too
-            consistent = False
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
-        status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent, explained)
-        if status == "tracking" and self._prior.doubted:
-            # the prior's place, but the frames favour another a little (prior.py); the confidence
-            # as for any frame not `tracking` (assess_frame)
-            status, confidence = "ambiguous", min(confidence, self.settings.tracking.dominance_weight)
-        if shown is not self.tracker and status == "tracking":
-            status = self.tracker.status  # a preview is one round on fewer frames: never a promise
+        (status, self.last_rule), confidence = shown.judge_frame(
+            alignment, None if plane_pose is None else plane_pose[:2], consistent, explained,
+            Recovery(kidnap_test=self._kidnap is not None, odometry_step=suspect), self._prior.doubted,
+            None if shown is self.tracker else self.tracker.round_facts)
         self.map_match.note(explained, status)
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose

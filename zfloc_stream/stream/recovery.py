@@ -32,6 +32,7 @@ from enum import Enum
 
 import numpy as np
 
+from ..estimate import Status
 from ..settings.loading import Settings
 from .monitor import ConsistencyMonitor
 from .scheduler import RoundJob, RoundOutcome, ScheduledRound
@@ -77,9 +78,9 @@ class KidnapTest:
         self.rounds_left -= 1
         if outcome.result is not None:
             self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
-        if self.tracker.status == "tracking" and better(self.tracker.best):
+        if self.tracker.status is Status.TRACKING and better(self.tracker.best):
             return Verdict.CARRIED_OFF
-        if self.rounds_left <= 0 or self.tracker.status == "tracking":
+        if self.rounds_left <= 0 or self.tracker.status is Status.TRACKING:
             return Verdict.NOT_CARRIED_OFF  # nothing else earned tracking (or the old place did)
         return Verdict.GOES_ON
 
