@@ -25,13 +25,13 @@ applies them. Deterministic: no randomness, ties broken by input order.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol, Sequence
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from . import policy
+from .mode import Mode, anchored_state, implied_jacobian
 from .status import NO_RECOVERY, Decision, FrameEvidence, Recovery, RoundFacts, Rule, contradicts, decide, round_facts, vouches
 from ..settings.loading import TrackingSettings
 from ..errors import InputError
@@ -45,69 +45,6 @@ class HypothesisLike(Protocol):
 
     alignment: Sim2
     score: float
-
-
-def _perp(v: np.ndarray) -> np.ndarray:
-    """v rotated by +90 degrees: d/dtheta of R(theta) v is R(theta) perp(v)."""
-    return np.array([-v[1], v[0]])
-
-
-def anchored_state(alignment: Sim2, anchor: np.ndarray) -> np.ndarray:
-    """(qx, qy, theta, log s) of an alignment about the anchor point."""
-    qx, qy = alignment.apply(anchor)
-    return np.array([qx, qy, alignment.theta, np.log(alignment.s)])
-
-
-def _implied_jacobian(state: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """d/dstate of (q + s R offset, theta, log s): identity plus the lever-arm columns."""
-    scaled_r = np.exp(state[3]) * Sim2(1.0, state[2]).R
-    jac = np.eye(4)
-    jac[:2, 2] = scaled_r @ _perp(offset)
-    jac[:2, 3] = scaled_r @ offset
-    return jac
-
-
-@dataclass(eq=False)
-class Mode:
-    """One live hypothesis. Read its fields; only the tracker changes them."""
-
-    id: int
-    kf: KalmanFilter
-    anchor: np.ndarray  # (2,) odometry-plane point the state is expressed about
-    score: float  # latest fresh score C = Cc - Cv
-    running_score: float  # exponentially smoothed score, drives the weight
-    weight: float = 0.0  # normalised over modes
-    hits: int = 1  # rounds in which it was found near the top (within confirm_score_gap of the round's best)
-    collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
-    tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
-    near_top: bool = True  # found near the top (within confirm_score_gap of the best) in the latest round
-
-    @property
-    def state(self) -> np.ndarray:
-        """(qx, qy, theta, log s) about `anchor`."""
-        return self.kf.x.ravel().copy()
-
-    @property
-    def local_covariance(self) -> np.ndarray:
-        """4x4 covariance of `state` (anchored parametrisation)."""
-        return self.kf.P.copy()
-
-    @property
-    def alignment(self) -> Sim2:
-        qx, qy, theta, log_s = self.kf.x.ravel()
-        s = np.exp(log_s)
-        t = np.array([qx, qy]) - s * Sim2(1.0, theta).R @ self.anchor
-        return Sim2(s, theta, t)
-
-    @property
-    def covariance(self) -> np.ndarray:
-        """4x4 covariance of alignment.params() = (tx, ty, theta, log s)."""
-        jac = _implied_jacobian(self.kf.x.ravel(), -self.anchor)  # t = q + s R (0 - a)
-        return jac @ self.kf.P @ jac.T
-
-    def pose(self, sensor_xy, yaw: float) -> np.ndarray:
-        """(x, y, theta) of the sensor pose in the floorplan implied by this mode."""
-        return np.array(self.alignment.apply_pose(float(sensor_xy[0]), float(sensor_xy[1]), yaw))
 
 
 class HypothesisTracker:
@@ -208,7 +145,7 @@ class HypothesisTracker:
         for mode in self.modes:
             x = mode.kf.x.ravel()
             offset = sensor - mode.anchor
-            jac = _implied_jacobian(x, offset)
+            jac = implied_jacobian(x, offset)
             x_new = x.copy()
             x_new[:2] += np.exp(x[3]) * Sim2(1.0, x[2]).R @ offset
             mode.kf.x = x_new.reshape(4, 1)
@@ -488,5 +425,5 @@ class HypothesisTracker:
         if mode is None:
             return None
         offset = np.asarray(sensor_xy, dtype=float).reshape(2) - mode.anchor
-        jac = _implied_jacobian(mode.kf.x.ravel(), offset)[:3]
+        jac = implied_jacobian(mode.kf.x.ravel(), offset)[:3]
         return jac @ mode.kf.P @ jac.T
