@@ -39,6 +39,8 @@ def test_the_package_keeps_its_layers():
         ("estimation/ransac.py", "from ..tracking.filter_bank import HypothesisTracker", "zfloc_stream.estimation.ransac -> zfloc_stream.tracking.filter_bank"),
         # the online loop writing its own log (io/ sits above it)
         ("stream/localizer.py", "from ..io.session.writer import SessionWriter", "zfloc_stream.stream.localizer -> zfloc_stream.io.session.writer"),
+        # inside stream/: the kidnap test under the audit that can start one
+        ("stream/recovery.py", "from .audit import Audit", "zfloc_stream.stream.recovery -> zfloc_stream.stream.audit"),
         # inside plans/: the raster floorplan under the vector one
         ("plans/floorplan.py", "from .vector import load_vector_floorplan", "zfloc_stream.plans.floorplan -> zfloc_stream.plans.vector"),
         # the estimation stage taking device helpers from the camera backbones (runtime/torch_support.py has them)

@@ -34,7 +34,7 @@ def scheduler(*overrides) -> RoundScheduler:
 
 
 def start(s: RoundScheduler, index: int, has_pose: bool, snapshot=None):
-    s.start(s.mode(has_pose), lambda copy: RoundJob(index, snapshot, [], False), np.zeros(3), {})
+    s.start(s.mode(has_pose), RoundJob(index, snapshot, [], False), np.zeros(3))
 
 
 def landed(s: RoundScheduler, index: int) -> list[int]:
@@ -62,11 +62,11 @@ def test_online_previews_the_first_round_one_frame_early_on_the_worker(fake_roun
     s = scheduler("localizer.pipeline=online", "localizer.every_k_frames=5")
     assert [s.due(fused, has_pose=False) for fused in (1, 2, 3)] == [None] * 3
     assert s.due(4, has_pose=False) == "preview"
-    s.start("preview", lambda copy: RoundJob(3, None, [], False), np.zeros(3), {})
+    s.start("preview", RoundJob(3, None, [], False), np.zeros(3))
     # nothing in flight, yet not inline: the preview gave this frame a pose
     assert s.due(5, has_pose=False, previewed=True) == "pipelined"
     assert [(d.job.index, d.preview) for d, _ in s.landed(4, {})] == [(3, True)]
-    s.start("pipelined", lambda copy: RoundJob(4, None, [], False), np.zeros(3), {})
+    s.start("pipelined", RoundJob(4, None, [], False), np.zeros(3))
     assert landed(s, 4) == [] and landed(s, 5) == [4]
     assert s.due(9, has_pose=True) is None and s.due(10, has_pose=True) == "pipelined"
     assert fake_rounds == [(3, False), (4, False)]
@@ -78,7 +78,7 @@ def test_a_preview_without_a_pose_leaves_the_round_inline(fake_rounds):
     the first pose comes where inline gives it."""
     s = scheduler("localizer.pipeline=online", "localizer.every_k_frames=5")
     assert s.due(4, has_pose=False) == "preview"
-    s.start("preview", lambda copy: RoundJob(3, "skip", [], False), np.zeros(3), {})
+    s.start("preview", RoundJob(3, "skip", [], False), np.zeros(3))
     assert landed(s, 4) == [3]
     assert s.due(5, has_pose=False, previewed=False) == "inline"
     s.close()

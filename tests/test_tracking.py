@@ -1,6 +1,6 @@
 """Synthetic hypothesis streams through the filter bank (no other stage needed)."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -493,6 +493,6 @@ def test_confidence_above_dominance_weight_only_on_tracking_frames():
     tracker.update([seen(TRUE, rng, 0, 0.8)], sensor_at(0), frame=0)
     assert tracker.status == "tracking" and tracker.best.weight == pytest.approx(1.0)
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("tracking", pytest.approx(1.0))
-    tracker._status = "ambiguous"  # the same mode, not vouched for by the status
+    tracker._round = replace(tracker._round, confirmation=policy.AMBIGUITY)  # the same mode, not vouched for by the status
     cap = tracker.settings.dominance_weight
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", cap)

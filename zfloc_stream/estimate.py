@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from enum import StrEnum
 
 import numpy as np
 
 from .geometry.sim2 import Sim2
 
-Status = Literal["initializing", "tracking", "ambiguous", "lost"]
-STATUSES: tuple[str, ...] = ("initializing", "tracking", "ambiguous", "lost")
+class Status(StrEnum):
+    """The status of a frame (tracking/status.py decides it). A str: it compares equal to,
+    prints and serialises as its value, the word logs, CSV and users already read."""
+
+    INITIALIZING = "initializing"
+    TRACKING = "tracking"
+    AMBIGUOUS = "ambiguous"
+    LOST = "lost"
+
+
+STATUSES: tuple[str, ...] = tuple(s.value for s in Status)
 
 
 @dataclass(frozen=True)
@@ -66,7 +75,7 @@ class Estimate:
     round_skipped: str | None = None  # why the round due at this frame did not run (None: ran, or none due)
     # in [0, 1], for a caller to threshold: the reported mode's share of the tracker's weight,
     # scaled by its confirmation, 0 when the frame's own evidence contradicts the pose
-    # (tracking.HypothesisTracker.assess_frame); nan before any pose
+    # (tracking.HypothesisTracker.judge_frame); nan before any pose
     confidence: float = float("nan")
     # the caller's pose prior (prior.py): None without one; "pending" (given, no frame fused
     # since), "active" (it steers the search and the tracker), "released" (a mode inside it

@@ -4,18 +4,18 @@
         for frame in frames:
             est = loc.push(frame)
 
-Each push fuses the frame into the rolling BEV. Every k frames a round runs: primitives
-are extracted, the live modes are re-scored and refined first (warm start), fresh minimal
-samples are drawn (fewer while one mode is confidently tracked, a full global search while
-initializing or lost), and the tracker updates its modes. Between rounds the pose is the
-current best alignment applied to the frame's odometry-plane pose, so every frame has one.
+A push, top to bottom (_push):
 
-Where and when a round runs (inline, on a worker, joined at fixed frames):
-round_scheduler.py. The consistency monitor (monitor.py) watches each fused frame against
-the tracked alignment; when it stops explaining them, a kidnap test (kidnap_recovery.py) asks
-whether the sensor is at another place, on what those frames saw alone. The local
-refinement (estimation/local_refinement.py) follows the tracked mode's drift on the recent
-frames' wall hits.
+1. fuse the frame into the rolling BEV, its odometry step judged (fusion.py; a jump
+   restarts the map and the modes);
+2. note it among the recent frames; the monitor judges it against the tracked place
+   (monitor.py; a run it does not explain starts a kidnap test, relocalization.py);
+3. apply the rounds that land at this frame, at join frames fixed when they started
+   (scheduler.py): the tracker's update the filter bank (tracking/), then the local
+   refinement follows the tracked mode (estimation/local_refinement.py);
+4. every k fused frames, start a round (a RoundJob: what it works on) and beside it the
+   kidnap test's or the audit's; between rounds the local refinement follows the drift;
+5. decide the frame's status (tracking/status.py) and report it (estimate.Estimate).
 """
 
 from __future__ import annotations
@@ -23,28 +23,31 @@ from __future__ import annotations
 import threading
 import time
 import warnings
-from collections import deque
 from copy import deepcopy
+from dataclasses import replace
 
 import numpy as np
 
-from ..backbones.perception import Perception, needs_backbones
+from ..backbones.perception import Perception
 from ..settings.loading import Settings
 from ..errors import UsageError, ZflocError
-from ..estimate import Alternative, Estimate
+from ..estimate import Alternative, Estimate, Status
 from ..estimation.local_refinement import LocalRefinement
 from ..estimation.scoring import scoring_kernels
 from ..plans.floorplan import Floorplan
 from ..frames import CameraFrame, LaserFrame
 from ..frontend.bev import RollingBEV
-from .recovery import KidnapTest, Verdict, best_at, better_place, outscored
+from .recovery import KidnapTest, Places, Verdict
+from .relocalization import Relocalization
 from .map_match import MapMatch
 from .monitor import ConsistencyMonitor
-from .odometry_jump import JUMPED, OdometryJumpWatch
+from .recent_frames import RecentFrames
+from .fusion import Fusion
+from .odometry_jump import JUMPED
 from ..prior import Prior, PriorWatch
 from .scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
-from ..geometry.sim2 import Sim2
-from ..tracking.filter_bank import HypothesisTracker, Mode
+from ..tracking.filter_bank import HypothesisTracker
+from ..tracking.status import Recovery, Rule
 
 
 class Localizer:
@@ -75,16 +78,15 @@ class Localizer:
             if not isinstance(prior, Prior):
                 raise ZflocError(f"Localizer: prior must be a zfloc_stream.prior.Prior, got {type(prior).__name__}")
             self.settings = self.settings.model_copy(update={"prior": self.settings.prior.model_copy(update=prior.settings_update())})
-        self.perception = perception
         self.floorplan = floorplan
         # the scorer backend (scoring.backend: the compiled FloorplanScorer or torch's) is
         # chosen and built once, here: a missing [torch] extra or a bad device is one error
         # now, not at the first round; rounds find it in the per-floorplan cache
         scoring_kernels(floorplan, self.settings.estimator.scoring)
         self.bev = RollingBEV(self.settings)
+        self.fusion = Fusion(self.bev, self.settings, perception)  # fusion.py: frames into the BEV, odometry steps judged
         self.tracker = HypothesisTracker(self.settings.tracking)
         self.frames_pushed = 0
-        self.frames_fused = 0
         self.last_result = None  # LocalizationResult of the latest round, for logging
         self.last_observation = None  # BevObservation of the latest round, for overlays
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
@@ -97,22 +99,12 @@ class Localizer:
             warnings.warn(f"localizer.odometry_scale 'metric' applies at estimator.scale_mode 'prior' only: at "
                           f"'{self.settings.estimator.scale_mode}' the depth and the odometry share one scale, so a depth "
                           f"network's scale error goes uncorrected", stacklevel=2)
-        self._recent_hits: deque[np.ndarray] = deque(maxlen=max(1, self.settings.localizer.local_frames))
-        self._recent_contradiction: deque[float] = deque(maxlen=self._recent_hits.maxlen)  # RollingBEV._contradiction per frame
-        self._recent_cameras: deque[np.ndarray] = deque(maxlen=self._recent_hits.maxlen)  # each recent frame's plane position
-        self._kidnap: KidnapTest | None = None  # the running kidnap test (kidnap_recovery.py)
-        self.kidnap_tests = 0  # kidnap tests started (the monitor saw the tracked place stop explaining the frames)
-        self.kidnaps_found = 0  # of them, adopted: another place was tracked
-        self.audit_tests = 0  # kidnap tests an audit started (localizer.audit_frames: a better place for the recent frames)
-        # the tracked mode's scores in the audits that did not outscore it (_audit_explains), and its id
-        self._audit_usual: deque[float] = deque(maxlen=self.settings.localizer.monitor_reference_frames)
-        self._audit_mode: int | None = None
-        self._adopted_at = -1  # frame whose kidnap round was adopted last
+        self.recent = RecentFrames(self.settings.localizer.local_frames)  # what the last local_frames fused frames left
+        self.relocalization = Relocalization(self.settings)  # the kidnap test and the audit (relocalization.py)
         self._preview: HypothesisTracker | None = None  # reported while the tracker has no pose (_show_preview)
-        self.jumps = OdometryJumpWatch(self.settings)  # odometry steps the sensor cannot have made (odometry_jump.py)
-        self.odometry_jumps = 0  # of them, found: each restarted the map and the hypotheses
+        self.last_rule: Rule | None = None  # why the latest estimate has its status (tracking/status.py)
+        self.odometry_jumps = 0  # odometry jumps found (odometry_jump.py): each restarted the map and the hypotheses
         self._jumped_at = -1  # frame of the latest odometry jump: rounds started before it are dropped
-        self._bev_fused_before = 0  # RollingBEV.frames_fused before the latest add (_judge_step)
         self._push_lock = threading.Lock()  # held by the running push: a second thread's push is refused
         self._closed = False
 
@@ -122,7 +114,7 @@ class Localizer:
     # ------------------------------------------------------------------------------
     def push(self, frame: CameraFrame | LaserFrame) -> Estimate:
         """Fuse the frame, watch it against the tracked alignment, apply the rounds due at
-        this frame, start a round every k fused frames, report.
+        this frame, start a round every k fused frames, decide its status, report.
 
         One thread feeds a localizer: its frames are one stream, in order. A push that
         starts while another thread's push runs raises UsageError at once (the running one
@@ -141,72 +133,37 @@ class Localizer:
             self._push_lock.release()
 
     def _push(self, frame: CameraFrame | LaserFrame) -> Estimate:
-        index, lc = self.frames_pushed, self.settings.localizer
+        """One frame, top to bottom: fuse it (its odometry step judged), note it and watch it
+        against the tracked place, apply the rounds that land here, start the rounds due,
+        decide its status and report."""
+        index = self.frames_pushed
         self.frames_pushed += 1
         timings: dict[str, float] = {}
-        plane_pose, skipped = self._fuse(frame, timings)
-        verdict = None if plane_pose is None else self._judge_step(plane_pose)
-        if verdict is not None and verdict[0] == JUMPED:
+        plane_pose, skipped = self.fusion.fuse(frame, timings)
+        step = None if plane_pose is None else self.fusion.judge_step(plane_pose)  # (SUSPECT or JUMPED, why) or None
+        if step is not None and step[0] == JUMPED:
             plane_pose = self._restart_after_jump(frame, index)
-        jump = None if verdict is None else verdict[1]
         if plane_pose is not None:
-            self._prior.bind(index, plane_pose)  # the frame a pending prior describes
-            self._recent_hits.append(self.bev.last_wall_hits)
-            self._recent_cameras.append(plane_pose[:2])
-            self._recent_contradiction.append(self.bev.last_contradiction)
-            # only a tracked alignment is watched, as reported (the local refinement's)
-            tracked = self.tracker.best if self.tracker.status == "tracking" else None
-            if self.monitor.wants_global_search(None if tracked is None else tracked.id,
-                                                None if tracked is None else self.local.alignment_of_mode(tracked),
-                                                self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
-                self._start_kidnap_test()
+            self._note_frame(index, plane_pose)
         # a round due here is applied even on a skipped frame: the join frame is fixed
-        reasons = [jump] + [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
-        previewed = self._preview is not None and self._preview.best is not None
-        mode = None if plane_pose is None else self.rounds.due(self.frames_fused, self.tracker.best is not None, previewed)
-        if mode is not None:
-            self.rounds.start(mode, lambda copy: self._round_job(index, copy), plane_pose, timings)
-            if self._kidnap is not None and mode != "preview":  # the tracker goes on meanwhile: nothing is lost if the test fails
-                self.rounds.start(mode, lambda copy: self._kidnap_job(index, copy), plane_pose, timings)
-            elif mode != "preview" and self._audits():
-                self.rounds.start(mode, lambda copy: self._audit_job(index, copy), plane_pose, timings)
-            reasons += [self._apply(*landed, timings) for landed in self.rounds.landed(index, timings)]
-        elif plane_pose is not None and lc.local_every_k_frames and self.frames_fused % lc.local_every_k_frames == 0:
-            self._refine_locally(timings)  # follow the drift between rounds too
-        round_skipped = "; ".join(r for r in reasons if r) or None
-        return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped, round_skipped,
-                              suspect=verdict is not None)
+        reasons = [None if step is None else step[1], *self._apply_landed(index, timings)]
+        if plane_pose is not None:
+            reasons += self._start_rounds(index, plane_pose, timings)
+        return self._estimate(index, getattr(frame, "timestamp", float("nan")), plane_pose, timings, skipped,
+                              "; ".join(r for r in reasons if r) or None, suspect=step is not None)
 
-    def _fuse(self, frame, timings: dict) -> tuple[np.ndarray | None, str | None]:
-        """Fuse one frame: its plane pose, or None and why it was skipped."""
-        t0 = time.perf_counter()
-        if self._wants_backbones(frame):
-            frame = self._perceive(frame)
-            timings["backbones"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-        if isinstance(frame, CameraFrame) and frame.depth is None:
-            if self.perception is not None and self.perception.depth is not None:
-                return None, f"depth network gave no depth within backbones.max_depth ({self.settings.backbones.max_depth} m)"
-            return None, "camera frame has an RGB image but no depth (name a depth network: backbones.depth_model / run --depth-model)"
-        try:
-            self._bev_fused_before = self.bev.frames_fused
-            self.bev.add(frame)
-            plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
-        except ZflocError as err:  # one bad frame never kills the stream
-            return None, str(err)
-        self.frames_fused += 1
-        timings["fusion"] = time.perf_counter() - t0
-        return plane_pose, None
-
-    def _judge_step(self, plane_pose: np.ndarray) -> tuple[str, str] | None:
-        """The odometry-jump watch's verdict on this frame's step (odometry_jump.py):
-        None, or (SUSPECT or JUMPED, why). Judged on a frame fused alone (a camera frame
-        that waited for gravity is fused with the buffer: its step and hits are not its
-        own), else recent motion starts again."""
-        if self.bev.frames_fused != self._bev_fused_before + 1:
-            self.jumps.restart(plane_pose)
-            return None
-        return self.jumps.judge(plane_pose, self.bev.last_known_hits, self.bev.last_contradiction, len(self.bev.last_wall_hits))
+    def _note_frame(self, index: int, plane_pose: np.ndarray) -> None:
+        """A fused frame: a pending prior describes it, it joins the recent frames, and the
+        monitor judges it against the tracked place (as reported: the local refinement's);
+        a run it does not explain raises the alarm: a kidnap test, or a global search."""
+        self._prior.bind(index, plane_pose)
+        self.recent.add(self.bev.last_wall_hits, plane_pose[:2], self.bev.last_contradiction)
+        tracked = self.tracker.best if self.tracker.status is Status.TRACKING else None
+        if self.monitor.wants_global_search(None if tracked is None else tracked.id,
+                                            None if tracked is None else self.local.alignment_of_mode(tracked),
+                                            self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
+            if not self.relocalization.alarm(self.bev.stamp, self.recent.contradiction):
+                self.rounds.request_global_search()
 
     def _restart_after_jump(self, frame, index: int) -> np.ndarray:
         """The odometry jumped (tracking_policy.ODOMETRY_JUMP): the map and every
@@ -215,14 +172,10 @@ class Localizer:
         confirm_rounds_after_loss hits), rounds started before are dropped, an active prior
         is released (it was bound in the cleared map); gravity stays.
         Returns the frame's plane pose in the restarted map."""
-        self.bev.clear_map()
-        self.bev.add(frame)  # it was fused once already: the same frame cannot fail now
-        plane_pose = np.asarray(self.bev.plane_pose(frame), dtype=float)
-        self.jumps.restart(plane_pose)
+        plane_pose = self.fusion.restart(frame)
         self._restart(lost=True)
         self._prior.release()  # it was bound in the cleared map
-        for recent in (self._recent_hits, self._recent_contradiction, self._recent_cameras):
-            recent.clear()
+        self.recent.clear()
         self._jumped_at = index
         self.odometry_jumps += 1
         return plane_pose
@@ -264,7 +217,7 @@ class Localizer:
             self.tracker.declare_lost()
         else:
             self.tracker = HypothesisTracker(self.settings.tracking)
-        self._preview, self._kidnap = None, None
+        self._preview, self.relocalization.test = None, None
         self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
         self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
 
@@ -274,12 +227,36 @@ class Localizer:
         return self._prior.state
 
     @property
+    def perception(self) -> Perception | None:
+        """The networks for RGB-only camera frames (None until a frame first needs them)."""
+        return self.fusion.perception
+
+    @property
+    def frames_fused(self) -> int:
+        return self.fusion.frames_fused
+
+    @property
+    def kidnap_tests(self) -> int:
+        """Kidnap tests the monitor started (the tracked place stopped explaining the frames)."""
+        return self.relocalization.tests
+
+    @property
+    def kidnaps_found(self) -> int:
+        """Kidnap tests adopted: another place was tracked."""
+        return self.relocalization.found
+
+    @property
+    def audit_tests(self) -> int:
+        """Kidnap tests an audit started (audit.py; not in kidnap_tests)."""
+        return self.relocalization.audit.tests
+
+    @property
     def kidnap_test(self) -> KidnapTest | None:
-        """The running kidnap test (kidnap_recovery.py), None when none runs."""
-        return self._kidnap
+        """The running kidnap test (recovery.py), None when none runs."""
+        return self.relocalization.test
 
     def close(self) -> None:
-        """Stop the round worker (round_scheduler.RoundScheduler.close); later pushes raise
+        """Stop the round worker (scheduler.RoundScheduler.close); later pushes raise
         UsageError. Closing twice is harmless."""
         self._closed = True
         self.rounds.close()
@@ -292,116 +269,70 @@ class Localizer:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _wants_backbones(self, frame) -> bool:
-        """Does a network have work on this frame? Asked of the perception when there is
-        one, else of the settings (which would make one)."""
-        if self.perception is not None:
-            return self.perception.wants(frame)
-        return needs_backbones(frame, self.settings.backbones)
-
-    def _perceive(self, frame: CameraFrame) -> CameraFrame:
-        """Network depth / labels for one frame. A model that cannot be loaded raises
-        (BackboneError): that is the run's setup, not one bad frame."""
-        if self.perception is None:
-            self.perception = Perception.from_settings(self.settings.backbones)
-        return frame if self.perception is None else self.perception.complete([frame])[0]
-
     # ------------------------------------------------------------------------------
-    def _round_job(self, index: int, copy: bool) -> RoundJob:
-        """What the round started at this frame sees (copy: it leaves this thread, and the
-        grid changes under it while the stream goes on). A BEV with too little evidence
-        skips the round when it is applied: the status stays as it is."""
-        try:
-            snapshot = self.bev.snapshot(copy=copy)
-        except ZflocError:
-            snapshot = None
-        # an active prior keeps the rounds global: each one checks it against the best place elsewhere
+    def _start_rounds(self, index: int, plane_pose: np.ndarray, timings: dict) -> list[str | None]:
+        """Start the rounds due at this frame (RoundScheduler.due): the tracker's, and beside
+        it the kidnap test's or the audit's (relocalization.py); an inline one lands at once.
+        Between rounds the local refinement follows the drift every local_every_k_frames
+        fused frames. Returns why the rounds that landed did not run."""
+        previewed = self._preview is not None and self._preview.best is not None
+        mode = self.rounds.due(self.frames_fused, self.tracker.best is not None, previewed)
+        if mode is None:
+            k = self.settings.localizer.local_every_k_frames
+            if k and self.frames_fused % k == 0:
+                self._refine_locally(timings)
+            return []
+        self._start_round(mode, self._tracking_job(index), plane_pose, timings)
+        beside = None if mode == "preview" else self.relocalization.job(index, self.tracker, self.local, self.bev.stamp)
+        if beside is not None:
+            self._start_round(mode, beside, plane_pose, timings)
+        return self._apply_landed(index, timings)
+
+    def _tracking_job(self, index: int) -> RoundJob:
+        """The tracker's round: on the whole BEV, warm-started from the live modes; a
+        confidently tracked mode narrows the search unless a global one is asked for or a
+        prior is active (each round checks it against the best place elsewhere)."""
         prior = self._prior.for_round
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted and prior is None
-        return RoundJob(index, snapshot, self.tracker.warm_start(), tracked, prior=prior)
+        return RoundJob(index, None, self.tracker.warm_start(), tracked, prior=prior)
 
-    def _audits(self) -> bool:
-        """Does this round tick also audit the tracked place (localizer.audit_frames)? While
-        a mode is tracked (even if a rival makes it `ambiguous` now), no kidnap test runs,
-        and the BEV holds audit_frames frames."""
-        n = self.settings.localizer.audit_frames
-        return n > 0 and self._kidnap is None and self.tracker.tracked_mode is not None and self.bev.stamp >= n
-
-    def _audit_job(self, index: int, copy: bool) -> RoundJob:
-        """The audit's round: a global search on what the last audit_frames frames saw alone,
-        warm-started from the tracked place (so that it competes on the same evidence)."""
-        since = self.bev.stamp - self.settings.localizer.audit_frames + 1
+    def _start_round(self, mode: str, job: RoundJob, plane_pose: np.ndarray, timings: dict) -> None:
+        """Start the round `job` describes on what the BEV holds now (since job.since), where
+        `mode` says. A round leaving this thread gets a copy of the grid, which changes under
+        it while the stream goes on (round_start: the time to hand it over). A BEV with too
+        little evidence skips the round when it is applied: the status stays as it is."""
+        t0 = time.perf_counter()
+        copy = self.rounds.on_worker(mode)
         try:
-            snapshot = self.bev.snapshot(copy=copy, since=since)
+            snapshot = self.bev.snapshot(copy=copy, since=job.since)
         except ZflocError:
             snapshot = None
-        tracked = self.tracker.tracked_mode
-        warm = [] if tracked is None else [self.local.alignment_of_mode(tracked)]
-        return RoundJob(index, snapshot, warm, False, since, audit=True)
+        self.rounds.start(mode, replace(job, snapshot=snapshot), plane_pose)
+        if copy:
+            timings["round_start"] = time.perf_counter() - t0
 
-    def _better_place(self, found: Sim2, old: Mode, sensor_xy) -> bool:
-        """kidnap_recovery.better_place of `found` against the old mode as it is reported: its
-        hits rescaled under metric odometry (else the recent hits themselves)."""
-        return better_place(found, self.local.alignment_of_mode(old), old, self.tracker, self.monitor, list(self._recent_hits),
-                            sensor_xy, [self.local.frame_hits(h, c, old) for h, c in zip(self._recent_hits, self._recent_cameras)]
-                            if self.local.metric_odometry else None)
-
-    def _outscored(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2 | None = None) -> bool:
-        """kidnap_recovery.outscored: the round (on recent frames alone) scores another place
-        (found, default its best) audit_margin above the tracked one as reported, and that
-        place explains the recent frames' hits as the monitor wants."""
-        if outcome.result is None or not outcome.result.hypotheses:
-            return False
-        found = outcome.result.hypotheses[0].alignment if found is None else found
-        lc = self.settings.localizer
-        if not outscored(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, sensor_xy,
-                         lc.audit_margin, lc.audit_min_violation, found):
-            return False
-        hits = [h for h in self._recent_hits if len(h)]
-        share = None if not hits else self.monitor.share(found, np.concatenate(hits))
-        return share is not None and self.monitor.explains(share, self.monitor.usual_share(old.id))
-
-    def _audit_explains(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2) -> bool:
-        """An audit's test adopts `found` only while its round still finds the old place
-        outscored (_outscored) and scores found at least monitor_relative_share of the old
-        mode's usual audit score (the median over its audits that did not outscore it; a
-        relative level, as the monitor's). In the held-out laser window aces 291 #100 the
-        recent frames saw what the map lacks: the old place fell from 0.78-0.84 to -0.06
-        and a place 4-8 m off, at 0.15, was adopted."""
-        if not self._outscored(outcome, old, sensor_xy, found) or old.id != self._audit_mode or not self._audit_usual:
-            return False
-        there = best_at(outcome.result.hypotheses, found, old, self.tracker, sensor_xy)
-        return there is not None and there.score >= self.settings.localizer.monitor_relative_share * float(np.median(self._audit_usual))
+    def _places(self) -> Places:
+        """What a kidnap test and an audit judge places on, as things are now."""
+        return Places(self.tracker, self.monitor, self.local, self.recent, self.settings.localizer)
 
     def _audit_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """An audit's round landed: if it scores another place audit_margin above the
-        tracked one on the recent frames (_outscored), a kidnap test starts on the audited
-        frames, this round its first."""
+        tracked one on the recent frames (audit.py), a kidnap test starts on the
+        audited frames, this round its first."""
         old = self.tracker.tracked_mode
-        if self._kidnap is not None or old is None:
+        if self.relocalization.test is not None or old is None:
             return None  # a test already runs, or nothing is tracked any more: nothing to audit
         if outcome.result is None:
             return outcome.skipped
-        if old.id != self._audit_mode:
-            self._audit_usual.clear()
-            self._audit_mode = old.id
-        if not self._outscored(outcome, old, scheduled.plane_pose[:2]):
-            here = best_at(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, scheduled.plane_pose[:2])
-            if here is not None:
-                self._audit_usual.append(here.score)
-            return None
-        self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, max(self._recent_contradiction, default=0.0),
-                                        since=scheduled.job.since, audit=True)
-        self.audit_tests += 1  # not in kidnap_tests: those the monitor started
-        return self._kidnap_round(scheduled, outcome, timings)
+        if self.relocalization.audit_starts_test(scheduled, outcome, old, self._places(), self.bev.stamp,
+                                                 self.recent.contradiction):
+            return self._kidnap_round(scheduled, outcome, timings)
+        return None
 
-    def _kidnap_job(self, index: int, copy: bool) -> RoundJob:
-        """The kidnap test's round: a global search on what the frames since its run saw."""
-        try:
-            snapshot = self.bev.snapshot(copy=copy, since=self._kidnap.since)
-        except ZflocError:
-            snapshot = None
-        return self._kidnap.job(index, snapshot, self.tracker.best)
+    def _apply_landed(self, index: int, timings: dict) -> list[str | None]:
+        """Apply the rounds whose join frame is this one (RoundScheduler.landed), oldest
+        first; for each, why it did not run (None: it did)."""
+        return [self._apply(scheduled, outcome, timings) for scheduled, outcome in self.rounds.landed(index, timings)]
 
     def _apply(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A round lands: the tracker updates as of the frame the round started at, then the
@@ -416,12 +347,12 @@ class Localizer:
         if scheduled.preview:
             return self._show_preview(scheduled, outcome, timings)
         if scheduled.job.audit:
-            if scheduled.job.index < self._adopted_at:
+            if scheduled.job.index < self.relocalization.adopted_at:
                 return "round started before a kidnap was found: dropped"
             return self._audit_round(scheduled, outcome, timings)
         if scheduled.job.since:
             return self._kidnap_round(scheduled, outcome, timings)
-        if scheduled.job.index < self._adopted_at:
+        if scheduled.job.index < self.relocalization.adopted_at:
             return "round started before a kidnap was found: dropped"
         if outcome.observation is None:
             return outcome.skipped
@@ -444,7 +375,7 @@ class Localizer:
         return None
 
     def _show_preview(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
-        """A preview round landed (round_scheduler.py): what a copy of the tracker makes of
+        """A preview round landed (scheduler.py): what a copy of the tracker makes of
         it is reported while the tracker itself has no pose. The tracker never sees it: the
         round of this frame, on all of its frames, updates the tracker when it lands."""
         if outcome.result is None:
@@ -459,41 +390,17 @@ class Localizer:
         return None
 
     # ------------------------------------------------------------------------------
-    def _start_kidnap_test(self) -> None:
-        """The monitor saw the tracked place stop explaining the frames. If a recent frame
-        contradicted what older frames saw, test whether the sensor was carried off
-        (kidnap_recovery.py); else it walked into what the map lacks, and the next round
-        searches globally on the whole BEV."""
-        contradiction = max(self._recent_contradiction, default=0.0)
-        if self._kidnap is not None and not self._kidnap.audit:
-            return
-        if contradiction >= self.settings.localizer.kidnap_contradiction:
-            # the monitor's test replaces an audit's: its frames start after the discontinuity
-            # (the apartment carried off: the audit's test, on frames from 5 before the cut,
-            # adopted nothing; the monitor's, started 2 frames later, adopts 20 frames after the cut)
-            self._kidnap = KidnapTest.start(self.bev.stamp, self.settings, contradiction)
-            self.kidnap_tests += 1
-        else:
-            self.rounds.request_global_search()
-
     def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
         """A kidnap test's round landed: adopt its bank (the BEV forgets what only older
         frames saw), go on, or end the test. Returns why the round did not count."""
-        test, old = self._kidnap, self.tracker.best
-        if test is None or test.since != scheduled.job.since:
+        test = self.relocalization.test
+        verdict = self.relocalization.feed(scheduled, outcome, self.tracker.best, self._places())
+        if verdict is None:
             return "kidnap test over: its last round is dropped"
         if outcome.result is not None:
             self.last_observation, self.last_result = outcome.observation, outcome.result
-        # a place explaining more of the recent hits; one an audit started also needs its own
-        # round to still find the old place outscored, by a place that explains the test's
-        # frames about as well as the tracked mode explained its BEV (audit_explains)
-        verdict = test.feed(scheduled, outcome, lambda found: old is None or (
-            self._better_place(found.alignment, old, scheduled.plane_pose[:2])
-            and (not test.audit or self._audit_explains(outcome, old, scheduled.plane_pose[:2], found.alignment))))
         if verdict is Verdict.CARRIED_OFF:
-            self.tracker, self._kidnap = test.tracker, None
-            self.kidnaps_found += 1
-            self._adopted_at = scheduled.job.index  # rounds started before this worked for the old place
+            self.tracker = test.tracker
             self.bev.forget_before(test.since)
             self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
             self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
@@ -502,13 +409,12 @@ class Localizer:
         if verdict is Verdict.NOT_CARRIED_OFF:
             # the test's global searches found no better place: the frames saw what the map
             # lacks, and the tracker, which went on meanwhile, keeps its modes
-            self._kidnap = None
             return "kidnap test ended: no other place earned tracking"
         return outcome.skipped
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.local.update(self.tracker.best, self._recent_hits, self.frames_fused, self._recent_cameras)
+        self.local.update(self.tracker.best, self.recent.hits, self.frames_fused, self.recent.cameras)
         timings["local_refinement"] = time.perf_counter() - t0
         if outcome is not None:
             outcome.timings["local_refinement"] = timings["local_refinement"]
@@ -526,21 +432,15 @@ class Localizer:
             pose = np.array(alignment.apply_pose(*plane_pose))
             cov = shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
             score = float(best.score)
-        # the frame's own evidence (its hits, the pose's step) can withhold `tracking` (tracking.assess_frame)
+        # one decision (tracking/status.py): the frame's own evidence (its hits, the pose's step),
+        # a running kidnap test and a doubtful odometry step can each withhold `tracking`
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
-        if (self._kidnap is not None or suspect) and alignment is not None:
-            # the run of frames the monitor saw contradicts the pose until the test ends; an
-            # odometry step the sensor cannot have made (odometry_jump.py) contradicts it too
-            consistent = False
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
-        status, confidence = shown.assess_frame(alignment, None if plane_pose is None else plane_pose[:2], consistent, explained)
-        if status == "tracking" and self._prior.doubted:
-            # the prior's place, but the frames favour another a little (prior.py); the confidence
-            # as for any frame not `tracking` (assess_frame)
-            status, confidence = "ambiguous", min(confidence, self.settings.tracking.dominance_weight)
-        if shown is not self.tracker and status == "tracking":
-            status = self.tracker.status  # a preview is one round on fewer frames: never a promise
+        (status, self.last_rule), confidence = shown.judge_frame(
+            alignment, None if plane_pose is None else plane_pose[:2], consistent, explained,
+            Recovery(kidnap_test=self.relocalization.test is not None, odometry_step=suspect), self._prior.doubted,
+            None if shown is self.tracker else self.tracker.round_facts)
         self.map_match.note(explained, status)
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose

@@ -8,8 +8,8 @@ the latest BEV's wall points that lie within localizer.monitor_distance of a pla
 under the reported alignment. Shared camera sessions on their own maps: >= 0.61 on every
 frame; on other buildings' maps 0.0-0.84, and 0.46 where the tracker said `tracking`.
 
-Per frame the share goes to tracking.assess_frame (the MAP_UNEXPLAINED rule of
-tracking_policy.py); per run, a run of at least MIN_JUDGED_FRAMES judged frames in which
+Per frame the share goes to the status decision (the MAP_UNEXPLAINED rule of
+tracking/status.py); per run, a run of at least MIN_JUDGED_FRAMES judged frames in which
 no frame was `tracking` ends with a verdict: the map does not match, with the share of
 frames it explained.
 """

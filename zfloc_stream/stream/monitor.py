@@ -9,7 +9,7 @@ reports `tracking`, monitor_frames inconsistent frames in a row ask the next rou
 full global search (the scheduler keeps the request until a round started after it lands).
 
 The same per-frame judgement withholds `tracking` from a single frame the alignment does
-not explain (tracking.assess_frame): the monitor and the estimate ask about the same frame
+not explain (FRAME_UNEXPLAINED, tracking/status.py): the monitor and the estimate ask about the same frame
 and alignment, so the share is computed once.
 
 What a right alignment explains depends on the map: a plan of walls only explains a

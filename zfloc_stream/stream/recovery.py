@@ -26,17 +26,21 @@ runs.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
+from ..estimate import Status
+from ..estimation.local_refinement import LocalRefinement
 from ..settings.loading import Settings
+from ..settings.localizer import LocalizerSettings
 from .monitor import ConsistencyMonitor
+from .recent_frames import RecentFrames
 from .scheduler import RoundJob, RoundOutcome, ScheduledRound
 from ..geometry.sim2 import Sim2
-from ..tracking.filter_bank import HypothesisTracker, Mode
+from ..tracking.filter_bank import HypothesisTracker
+from ..tracking.mode import Mode
 
 
 class Verdict(Enum):
@@ -65,23 +69,67 @@ class KidnapTest:
         since = bev_stamp - settings.localizer.monitor_frames + 1 if since is None else since
         return cls(since, bank, settings.tracking.confirm_rounds_after_loss + 1, contradiction, audit)
 
-    def job(self, index: int, snapshot, old: Mode | None) -> RoundJob:
-        """The test's round started at frame index: a global search on `snapshot` (the BEV
-        since self.since), warm-started from its bank and the old place."""
+    def job(self, index: int, old: Mode | None) -> RoundJob:
+        """The test's round started at frame index: a global search on what the BEV saw since
+        self.since, warm-started from its bank and the old place."""
         warm = self.tracker.warm_start() + ([] if old is None else [old.alignment])
-        return RoundJob(index, snapshot, warm, False, self.since)
+        return RoundJob(index, None, warm, False, self.since)
 
-    def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome, better: Callable[[Mode], bool]) -> Verdict:
-        """One of the test's rounds landed: update the bank; better(found) says whether its
-        tracked mode is a better place than the old one (better_place)."""
+    def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome) -> Mode | None:
+        """One of the test's rounds landed: update the bank. Returns the place it tracks,
+        None while it tracks none."""
         self.rounds_left -= 1
         if outcome.result is not None:
             self.tracker.update(outcome.result.hypotheses, scheduled.plane_pose[:2], scheduled.job.index)
-        if self.tracker.status == "tracking" and better(self.tracker.best):
+        return self.tracker.best if self.tracker.status is Status.TRACKING else None
+
+    def verdict(self, better: bool) -> Verdict:
+        """After feed: better says whether the place it returned is a better place than the
+        old one (Places.better_place)."""
+        if better:
             return Verdict.CARRIED_OFF
-        if self.rounds_left <= 0 or self.tracker.status == "tracking":
+        if self.rounds_left <= 0 or self.tracker.status is Status.TRACKING:
             return Verdict.NOT_CARRIED_OFF  # nothing else earned tracking (or the old place did)
         return Verdict.GOES_ON
+
+
+@dataclass(frozen=True)
+class Places:
+    """What places are judged on while the stream goes on: the tracker (its pose-jump gate
+    says what another place is), the monitor (what explaining the frames means), the local
+    refinement (a mode's alignment as reported) and the recent frames' hits."""
+
+    tracker: HypothesisTracker
+    monitor: ConsistencyMonitor
+    local: LocalRefinement
+    recent: RecentFrames
+    settings: LocalizerSettings
+
+    def better_place(self, found: Sim2, old: Mode, sensor_xy) -> bool:
+        """better_place of `found` against the old mode as it is reported: its hits rescaled
+        under metric odometry (else the recent hits themselves)."""
+        recent, local = self.recent, self.local
+        return better_place(found, local.alignment_of_mode(old), old, self.tracker, self.monitor, recent.hits, sensor_xy,
+                            [local.frame_hits(h, c, old) for h, c in zip(recent.hits, recent.cameras)]
+                            if local.metric_odometry else None)
+
+    def outscored(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2 | None = None) -> bool:
+        """outscored: the round (on recent frames alone) scores another place (found, default
+        its best) audit_margin above the tracked one as reported, and that place explains
+        the recent frames' hits as the monitor wants."""
+        if outcome.result is None or not outcome.result.hypotheses:
+            return False
+        found = outcome.result.hypotheses[0].alignment if found is None else found
+        if not outscored(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, sensor_xy,
+                         self.settings.audit_margin, self.settings.audit_min_violation, found):
+            return False
+        hits = self.recent.all_hits()
+        share = None if hits is None else self.monitor.share(found, hits)
+        return share is not None and self.monitor.explains(share, self.monitor.usual_share(old.id))
+
+    def best_at(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
+        """best_at among the round's hypotheses."""
+        return best_at(outcome.result.hypotheses, place, mode, self.tracker, sensor_xy)
 
 
 def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,

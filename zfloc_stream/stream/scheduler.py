@@ -49,7 +49,8 @@ from ..geometry.sim2 import Sim2
 
 @dataclass(frozen=True)
 class RoundJob:
-    """What the round started at frame `index` works on, fixed at that frame."""
+    """What the round started at frame `index` works on, fixed at that frame. The localizer
+    describes it and adds the snapshot of its BEV as it starts it (Localizer._start_round)."""
 
     index: int
     snapshot: BevSnapshot | None  # None: nothing fused into the grid yet
@@ -208,19 +209,19 @@ class RoundScheduler:
             return "preview"
         return None
 
-    def start(self, mode: str, make_job, plane_pose: np.ndarray, timings: dict) -> None:
-        """Start the round of the job make_job(copy) gives (copy: the snapshot must be a
-        copy, since the round leaves this thread) where `mode` (self.due(...)) says;
-        `landed` returns it at its join frame."""
-        lc = self.settings.localizer
-        t0 = time.perf_counter()
-        on_worker = mode in ("pipelined", "preview")
-        job = make_job(on_worker)
-        delay = {"inline": 0, "preview": 1}.get(mode, lc.round_delay)
+    @staticmethod
+    def on_worker(mode: str) -> bool:
+        """Does a round started in `mode` (self.due(...)) leave this thread? Then its snapshot
+        must be a copy: the grid changes under it while the stream goes on."""
+        return mode in ("pipelined", "preview")
+
+    def start(self, mode: str, job: RoundJob, plane_pose: np.ndarray) -> None:
+        """Start the job's round where `mode` (self.due(...)) says; `landed` returns it at
+        its join frame."""
+        delay = {"inline": 0, "preview": 1}.get(mode, self.settings.localizer.round_delay)
         scheduled = ScheduledRound(job, job.index + delay, plane_pose, self._requests, preview=mode == "preview")
-        if on_worker:
+        if self.on_worker(mode):
             scheduled.outcome = self._executor().submit(*self._task(job))
-            timings["round_start"] = time.perf_counter() - t0
         else:
             scheduled.outcome = run_round(self.floorplan, self.settings, job)
         self._scheduled.append(scheduled)

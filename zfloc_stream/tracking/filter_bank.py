@@ -25,13 +25,14 @@ applies them. Deterministic: no randomness, ties broken by input order.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol, Sequence
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from . import policy
+from .mode import Mode, anchored_state, implied_jacobian
+from .status import NO_RECOVERY, Decision, FrameEvidence, Recovery, RoundFacts, Rule, contradicts, decide, round_facts, vouches
 from ..settings.loading import TrackingSettings
 from ..errors import InputError
 from ..estimate import Alternative, Status
@@ -44,69 +45,6 @@ class HypothesisLike(Protocol):
 
     alignment: Sim2
     score: float
-
-
-def _perp(v: np.ndarray) -> np.ndarray:
-    """v rotated by +90 degrees: d/dtheta of R(theta) v is R(theta) perp(v)."""
-    return np.array([-v[1], v[0]])
-
-
-def anchored_state(alignment: Sim2, anchor: np.ndarray) -> np.ndarray:
-    """(qx, qy, theta, log s) of an alignment about the anchor point."""
-    qx, qy = alignment.apply(anchor)
-    return np.array([qx, qy, alignment.theta, np.log(alignment.s)])
-
-
-def _implied_jacobian(state: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """d/dstate of (q + s R offset, theta, log s): identity plus the lever-arm columns."""
-    scaled_r = np.exp(state[3]) * Sim2(1.0, state[2]).R
-    jac = np.eye(4)
-    jac[:2, 2] = scaled_r @ _perp(offset)
-    jac[:2, 3] = scaled_r @ offset
-    return jac
-
-
-@dataclass(eq=False)
-class Mode:
-    """One live hypothesis. Read its fields; only the tracker changes them."""
-
-    id: int
-    kf: KalmanFilter
-    anchor: np.ndarray  # (2,) odometry-plane point the state is expressed about
-    score: float  # latest fresh score C = Cc - Cv
-    running_score: float  # exponentially smoothed score, drives the weight
-    weight: float = 0.0  # normalised over modes
-    hits: int = 1  # rounds in which it was found near the top (within confirm_score_gap of the round's best)
-    collapses: int = 0  # consecutive rounds its score collapsed or it went unseen
-    tracked_rounds: int = 0  # consecutive rounds it was the tracked mode
-    near_top: bool = True  # found near the top (within confirm_score_gap of the best) in the latest round
-
-    @property
-    def state(self) -> np.ndarray:
-        """(qx, qy, theta, log s) about `anchor`."""
-        return self.kf.x.ravel().copy()
-
-    @property
-    def local_covariance(self) -> np.ndarray:
-        """4x4 covariance of `state` (anchored parametrisation)."""
-        return self.kf.P.copy()
-
-    @property
-    def alignment(self) -> Sim2:
-        qx, qy, theta, log_s = self.kf.x.ravel()
-        s = np.exp(log_s)
-        t = np.array([qx, qy]) - s * Sim2(1.0, theta).R @ self.anchor
-        return Sim2(s, theta, t)
-
-    @property
-    def covariance(self) -> np.ndarray:
-        """4x4 covariance of alignment.params() = (tx, ty, theta, log s)."""
-        jac = _implied_jacobian(self.kf.x.ravel(), -self.anchor)  # t = q + s R (0 - a)
-        return jac @ self.kf.P @ jac.T
-
-    def pose(self, sensor_xy, yaw: float) -> np.ndarray:
-        """(x, y, theta) of the sensor pose in the floorplan implied by this mode."""
-        return np.array(self.alignment.apply_pose(float(sensor_xy[0]), float(sensor_xy[1]), yaw))
 
 
 class HypothesisTracker:
@@ -129,14 +67,15 @@ class HypothesisTracker:
         self._bev_ready = False
         self._tracked_id: int | None = None
         self._was_lost = False
-        self._status: Status = "initializing"
-        self._last_reported: Sim2 | None = None  # the alignment assess_frame saw last
+        self._round = RoundFacts()  # what the latest round established (status.decide reads it)
+        self._last_reported: Sim2 | None = None  # the alignment judge_frame saw last
 
     def declare_lost(self) -> None:
         """Drop every mode and report lost: the localizer saw the tracked alignment stop
         explaining new frames (e.g. an odometry jump) before any round did."""
         self.reset()
-        self._was_lost, self._status = True, "lost"
+        self._was_lost = True
+        self._round = RoundFacts(was_lost=True)
 
     # --- the round --------------------------------------------------------------------
     def update(
@@ -158,7 +97,7 @@ class HypothesisTracker:
         self._predict(sensor, frame)
         self._bev_ready = bool(bev_ready)
         if not self._bev_ready:
-            self._status = "initializing"
+            self._round = RoundFacts(ran=True, was_lost=self._was_lost, bev_ready=False)
             return
         order = sorted(range(len(hypotheses)), key=lambda j: -tie_key(hypotheses[j].score))
         hyps = [hypotheses[j] for j in order]
@@ -206,7 +145,7 @@ class HypothesisTracker:
         for mode in self.modes:
             x = mode.kf.x.ravel()
             offset = sensor - mode.anchor
-            jac = _implied_jacobian(x, offset)
+            jac = implied_jacobian(x, offset)
             x_new = x.copy()
             x_new[:2] += np.exp(x[3]) * Sim2(1.0, x[2]).R @ offset
             mode.kf.x = x_new.reshape(4, 1)
@@ -315,15 +254,18 @@ class HypothesisTracker:
             mode.weight = float(wi)
 
     # --- status -----------------------------------------------------------------------
-    # The rules are tracking_policy's; _update_status (per round) and assess_frame (per
-    # frame) apply them.
+    # status.decide says which status a round and a frame get; _update_status applies a
+    # round's decision to the modes, judge_frame gathers a frame's evidence.
     def rounds_to_track(self) -> int:
         return policy.rounds_to_track(self._was_lost, self.settings)
 
     def _update_status(self) -> None:
+        """Decide the round's status (status.decide) and apply it to the modes."""
         tracked = self._mode_by_id(self._tracked_id)
         leader = self.best  # the tracked mode unless an established rival outweighs it
-        if self._tracked_id is not None and policy.loss_rule(tracked, leader, self.settings):
+        self._round = round_facts(leader, self.modes, tracked, self._tracked_id, self._was_lost, self.settings)
+        rule = decide(self._round).rule
+        if rule in (Rule.PRUNED, Rule.COLLAPSED, Rule.OVERTAKEN):
             # The mode we were sure of stopped explaining the data while something else
             # did better: report lost. It leaves the bank only when a rival exists, so a
             # pose is always reported (the rival's, or the old one's while nothing else).
@@ -332,24 +274,15 @@ class HypothesisTracker:
                 self._normalise()
             elif tracked is not None:
                 tracked.collapses = 0
-            self._tracked_id, self._was_lost, self._status = None, True, "lost"
+            self._tracked_id, self._was_lost = None, True
             return
-        waiting: Status = "lost" if self._was_lost else "initializing"
-        rule = policy.round_status_rule(leader, self.modes, self._tracked_id, self._was_lost, self.settings)
-        if rule == policy.WAITING_FOR_CONFIRMATION:
-            self._tracked_id, self._status = None, waiting
-        elif rule == policy.AMBIGUITY:
-            # a tracked mode stays the one reported (hysteresis) while a rival is only as
-            # good; before any mode was tracked, nothing is
-            self._status = "ambiguous"
-        elif rule == policy.THIN_EVIDENCE:
-            # a tracked mode keeps its place (as above), an untracked one waits
-            self._status = "ambiguous" if self._tracked_id is not None else waiting
-        else:
+        if rule is Rule.WAITING_FOR_CONFIRMATION:
+            self._tracked_id = None  # before any mode was tracked, nothing is
+        elif rule is Rule.TRACKING:
             if self._tracked_id != leader.id:
                 leader.tracked_rounds = 0
             leader.tracked_rounds += 1
-            self._tracked_id, self._was_lost, self._status = leader.id, False, "tracking"
+            self._tracked_id, self._was_lost = leader.id, False
         for mode in self.modes:
             if mode.id != self._tracked_id:
                 mode.tracked_rounds = 0
@@ -372,46 +305,60 @@ class HypothesisTracker:
 
     def assess_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None,
                      explained: float | None = None) -> tuple[Status, float]:
-        """(status, confidence) of one frame's reported pose.
+        """(status, confidence) of one frame's reported pose, on the frame's own evidence
+        alone (judge_frame without recovery, prior or preview)."""
+        decision, confidence = self.judge_frame(alignment, sensor_xy, frame_consistent, explained)
+        return decision.status, confidence
 
-        status: the round's status, except that a `tracking` frame whose own evidence
-        contradicts the pose is reported `lost`: its wall hits are not explained by the
-        reported alignment (frame_consistent False, the localizer's monitor; an odometry
-        spike or jump lands here), or the pose jumped (pose_jumped).
+    def judge_frame(self, alignment: Sim2 | None, sensor_xy, frame_consistent: bool | None, explained: float | None = None,
+                    recovery: Recovery = NO_RECOVERY, prior_doubted: bool = False,
+                    preview_of: RoundFacts | None = None) -> tuple[Decision, float]:
+        """(status.Decision, confidence) of one frame's reported pose.
+
+        status: the round's status, except that the frame's own evidence can withhold
+        `tracking` (status.decide): its wall hits are not explained by the reported
+        alignment (frame_consistent False, the localizer's monitor; an odometry spike or
+        jump lands here), the pose jumped (pose_jumped), or the map explains too little
+        of the BEV (explained below min_explained_share: MAP_UNEXPLAINED); so can the
+        recovery, a doubted prior and, when this bank is a preview, the tracker's own
+        round (preview_of).
 
         confidence in [0, 1], for a caller to threshold: the reported mode's share of the
         bank's weight, scaled by how far it is confirmed (hits / rounds_to_track, at most
-        1), at most dominance_weight unless the frame is `tracking`, and 0 on a frame whose
-        evidence contradicts it. nan before any mode.
-
-        explained: the share of the latest BEV's wall points the map explains under the
-        alignment (map_match.py); below min_explained_share a `tracking` frame is reported
-        `ambiguous` (MAP_UNEXPLAINED: no place in this map is known to explain what the
-        sensor sees), and the confidence is scaled by explained / min_explained_share.
+        1), at most dominance_weight unless the decision vouches for the pose
+        (status.vouches), and 0 on a frame whose evidence contradicts it. nan before any
+        mode. explained: the share of the latest BEV's wall points the map explains under
+        the alignment (map_match.py); below min_explained_share the confidence is scaled
+        by explained / min_explained_share.
         """
         best = self.best
         previous, self._last_reported = self._last_reported, alignment
         if best is None or alignment is None or sensor_xy is None:
-            return self._status, float("nan")
-        contradicted = frame_consistent is False or self.pose_jumped(previous, alignment, sensor_xy, best)
-        status: Status = "lost" if contradicted and self._status == "tracking" else self._status
-        unexplained = not policy.map_explains(explained, self.settings)
-        if status == "tracking" and unexplained:
-            status = "ambiguous"
-        confirmation = min(1.0, best.hits / self.rounds_to_track())
-        confidence = 0.0 if contradicted else float(best.weight * confirmation)
-        if unexplained:
-            confidence *= explained / self.settings.min_explained_share
+            decision = decide(self._round, None, recovery, prior_doubted, preview_of)
+            confidence = float("nan")
+        else:
+            frame = FrameEvidence(frame_consistent, self.pose_jumped(previous, alignment, sensor_xy, best),
+                                  policy.map_explains(explained, self.settings))
+            decision = decide(self._round, frame, recovery, prior_doubted, preview_of)
+            confirmation = min(1.0, best.hits / self.rounds_to_track())
+            confidence = 0.0 if contradicts(frame, recovery) else float(best.weight * confirmation)
+            if not frame.map_explains:
+                confidence *= explained / self.settings.min_explained_share
         # never more than the status vouches for: above dominance_weight only while tracking
         # (belgioioso camera session: a mode 16 m off, not singled out, carried 0.96 of the weight)
-        return status, confidence if status == "tracking" else min(confidence, self.settings.dominance_weight)
+        return decision, confidence if vouches(decision) else min(confidence, self.settings.dominance_weight)
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:
         return next((m for m in self.modes if m.id == mode_id), None)
 
     @property
+    def round_facts(self) -> RoundFacts:
+        """What the latest round established (status.RoundFacts)."""
+        return self._round
+
+    @property
     def status(self) -> Status:
-        """As of the latest round:
+        """As of the latest round (status.decide; the table there names every rule):
 
         lost         the tracked mode collapsed (a rival beat its fresh score by
                      lost_score_gap, or nothing matched it, lost_rounds rounds in a row;
@@ -423,17 +370,17 @@ class HypothesisTracker:
         ambiguous    another confirmed mode has weight >= ambiguity_ratio * best's, or
                      the tracked mode's share of the weight fell to dominance_weight
         tracking     one confirmed mode dominates: no close confirmed rival and more than
-                     dominance_weight of the weight. Per frame, assess_frame also
+                     dominance_weight of the weight. Per frame, judge_frame also
                      withholds it when the frame's own evidence contradicts the pose.
         """
-        return self._status
+        return decide(self._round).status
 
     @property
     def confidently_tracking(self) -> bool:
         """One dominant mode tracked for confident_rounds rounds: fewer RANSAC samples will do."""
         best = self.best
         return (
-            self._status == "tracking"
+            self.status is Status.TRACKING
             and best is not None
             and best.tracked_rounds >= self.settings.confident_rounds
         )
@@ -478,5 +425,5 @@ class HypothesisTracker:
         if mode is None:
             return None
         offset = np.asarray(sensor_xy, dtype=float).reshape(2) - mode.anchor
-        jac = _implied_jacobian(mode.kf.x.ravel(), offset)[:3]
+        jac = implied_jacobian(mode.kf.x.ravel(), offset)[:3]
         return jac @ mode.kf.P @ jac.T

@@ -1,0 +1,94 @@
+"""Relocalization in the stream: the running kidnap test (recovery.py), the audit that can
+start one (audit.py), and what they found.
+
+The localizer raises the monitor's alarm here, asks for the round that runs beside the
+tracker's at each round tick (the test's, or else the audit's), hands over those rounds as
+they land, and adopts the test's bank when the verdict is CARRIED_OFF. The tracker's own
+rounds go on meanwhile: nothing is lost if a test fails.
+"""
+
+from __future__ import annotations
+
+from ..estimation.local_refinement import LocalRefinement
+from ..geometry.sim2 import Sim2
+from ..settings.loading import Settings
+from ..tracking.filter_bank import HypothesisTracker
+from ..tracking.mode import Mode
+from .audit import Audit
+from .recovery import KidnapTest, Places, Verdict
+from .scheduler import RoundJob, RoundOutcome, ScheduledRound
+
+
+class Relocalization:
+    def __init__(self, settings: Settings):
+        self.settings = settings
+        self.test: KidnapTest | None = None  # the running kidnap test
+        self.audit = Audit(settings.localizer)
+        self.tests = 0  # kidnap tests the monitor started (the tracked place stopped explaining the frames)
+        self.found = 0  # kidnap tests adopted: another place was tracked
+        self.adopted_at = -1  # frame whose test round was adopted last: rounds started before worked for the old place
+
+    def alarm(self, bev_stamp: int, contradiction: float) -> bool:
+        """The monitor saw the tracked place stop explaining the frames. If a recent frame
+        contradicted what older frames saw (contradiction, at least kidnap_contradiction),
+        a test starts: was the sensor carried off? Else it walked into what the map lacks,
+        and (False) the next round should search globally on the whole BEV."""
+        if self.test is not None and not self.test.audit:
+            return True
+        if contradiction >= self.settings.localizer.kidnap_contradiction:
+            # the monitor's test replaces an audit's: its frames start after the discontinuity
+            # (the apartment carried off: the audit's test, on frames from 5 before the cut,
+            # adopted nothing; the monitor's, started 2 frames later, adopts 20 frames after the cut)
+            self.test = KidnapTest.start(bev_stamp, self.settings, contradiction)
+            self.tests += 1
+            return True
+        return False
+
+    def job(self, index: int, tracker: HypothesisTracker, local: LocalRefinement, bev_stamp: int) -> RoundJob | None:
+        """The round that runs beside the tracker's at this round tick: the running test's,
+        or else the audit's when it is due (Audit.due); None."""
+        if self.test is not None:
+            return self.test.job(index, tracker.best)
+        tracked = tracker.tracked_mode
+        if self.audit.due(tracked, bev_stamp):
+            return self.audit.job(index, bev_stamp, local.alignment_of_mode(tracked))
+        return None
+
+    def audit_starts_test(self, scheduled: ScheduledRound, outcome: RoundOutcome, old: Mode, places: Places,
+                          bev_stamp: int, contradiction: float) -> bool:
+        """An audit's round landed on the tracked mode `old` (no test running): when it
+        scores another place audit_margin above it (Audit.outscores), a test starts on the
+        audited frames; that round is its first (feed it)."""
+        if not self.audit.outscores(outcome, old, scheduled.plane_pose[:2], places):
+            return False
+        self.test = KidnapTest.start(bev_stamp, self.settings, contradiction, since=scheduled.job.since, audit=True)
+        self.audit.tests += 1  # not in self.tests: those the monitor started
+        return True
+
+    def feed(self, scheduled: ScheduledRound, outcome: RoundOutcome, old: Mode | None, places: Places) -> Verdict | None:
+        """A test's round landed (old: the mode the tracker reports): the running test's
+        verdict, the test ending on CARRIED_OFF (adopt its bank) or NOT_CARRIED_OFF; None
+        when the test the round was for is over."""
+        test = self.test
+        if test is None or test.since != scheduled.job.since:
+            return None
+        found = test.feed(scheduled, outcome)  # the place its bank tracks, if any
+        verdict = test.verdict(found is not None and self._better(found.alignment, old, scheduled, outcome, places))
+        if verdict is Verdict.CARRIED_OFF:
+            self.found += 1
+            self.adopted_at = scheduled.job.index
+        if verdict is not Verdict.GOES_ON:
+            self.test = None
+        return verdict
+
+    def _better(self, found: Sim2, old: Mode | None, scheduled: ScheduledRound, outcome: RoundOutcome,
+                places: Places) -> bool:
+        """Is the place the test's bank tracks better than the old one? One explaining more
+        of the recent hits (Places.better_place); one an audit started also needs its own
+        round to still find the old place outscored, by a place that explains the test's
+        frames about as well as the tracked mode explained its BEV (Audit.explains)."""
+        if old is None:
+            return True
+        sensor_xy = scheduled.plane_pose[:2]
+        return places.better_place(found, old, sensor_xy) and (
+            not self.test.audit or self.audit.explains(outcome, old, sensor_xy, found, places))
