@@ -29,7 +29,7 @@ from test_batch_localization import make_trial, pose_errors  # noqa: E402  (scen
 from zfloc_stream.settings.loading import Settings  # noqa: E402
 from zfloc_stream.estimation import localize  # noqa: E402
 from zfloc_stream.runtime.rng import make_rng  # noqa: E402
-from zfloc_stream.sim.scenes import build_scene  # noqa: E402
+from zfloc_stream.sim.builtin_scenes import build_scene  # noqa: E402
 
 GOALS_MS = {"apartment": 50.0, "office": 630.0}
 

@@ -27,7 +27,7 @@ from zfloc_stream.frontend.bev import RollingBEV
 from zfloc_stream.observation import BevObservation
 from zfloc_stream.sim.raycast2d import RangeSensor2D
 from zfloc_stream.runtime.rng import make_rng
-from zfloc_stream.sim.scenes import build_scene
+from zfloc_stream.sim.builtin_scenes import build_scene
 from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
 
 SCENES = ("rooms", "apartment", "office")
