@@ -156,7 +156,7 @@ def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
     calls = []
     exact = A._exact_peaks
     monkeypatch.setattr(A, "_exact_peaks", lambda *a: calls.append(1) or exact(*a))
-    monkeypatch.setattr(C, "_ROUNDING_SLACK", -1.0)
+    monkeypatch.setattr(A, "ROUNDING_SLACK", -1.0)
     assert np.array_equal(C.correlative_models(scene.floorplan, points, **kw), ref)
     assert len(calls) == 45  # every angle
     monkeypatch.undo()
