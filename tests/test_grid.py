@@ -10,17 +10,21 @@ from zfloc_stream.estimation.field_fit import field_value_and_gradient
 from zfloc_stream.frontend.scan_match import GridField
 
 
-def corner_weights(field, origin, res, q):
-    """The corner-weight form (Floorplan.distance and the Cc kernel before the grid type)."""
+def cell_and_fractions(field, origin, res, q):
+    """The part both forms share: cell coordinates, clipped, the lower-left cell and the fractions."""
     h, w = field.shape
-    f = field.ravel()
     u = (q[:, 0] - origin[0]) / res - 0.5
     v = (q[:, 1] - origin[1]) / res - 0.5
     uc, vc = np.clip(u, 0.0, w - 1.0), np.clip(v, 0.0, h - 1.0)
     c0 = np.minimum(uc.astype(np.int64), w - 2)
     r0 = np.minimum(vc.astype(np.int64), h - 2)
-    fu, fv = uc - c0, vc - r0
-    i = r0 * w + c0
+    return u, v, uc, vc, r0 * w + c0, uc - c0, vc - r0
+
+
+def corner_weights(field, origin, res, q):
+    """The corner-weight form (Floorplan.distance and the Cc kernel before the grid type)."""
+    f, w = field.ravel(), field.shape[1]
+    u, v, uc, vc, i, fu, fv = cell_and_fractions(field, origin, res, q)
     top = f[i] * (1.0 - fu) + f[i + 1] * fu
     bottom = f[i + w] * (1.0 - fu) + f[i + w + 1] * fu
     return top * (1.0 - fv) + bottom * fv + np.hypot(u - uc, v - vc) * res
@@ -28,15 +32,8 @@ def corner_weights(field, origin, res, q):
 
 def differences(field, origin, res, q):
     """The difference form with its gradient (field_fit's numpy lookup before the grid type)."""
-    h, w = field.shape
-    f = field.ravel()
-    u = (q[:, 0] - origin[0]) / res - 0.5
-    v = (q[:, 1] - origin[1]) / res - 0.5
-    uc, vc = np.clip(u, 0.0, w - 1.0), np.clip(v, 0.0, h - 1.0)
-    c0 = np.minimum(uc.astype(np.int64), w - 2)
-    r0 = np.minimum(vc.astype(np.int64), h - 2)
-    fu, fv = uc - c0, vc - r0
-    i = r0 * w + c0
+    f, w = field.ravel(), field.shape[1]
+    u, v, uc, vc, i, fu, fv = cell_and_fractions(field, origin, res, q)
     f00, f01, f10, f11 = f[i], f[i + 1], f[i + w], f[i + w + 1]
     bottom = f00 + (f01 - f00) * fu
     top = f10 + (f11 - f10) * fu
