@@ -226,7 +226,7 @@ def test_draw_and_solver_kernels_on_no_samples():
 def test_scoring_kernels_on_no_points_no_models():
     """_coarse_kernel, _consistency_kernel, _violation_kernel, _greedy_distinct_kernel:
     no model, no point (the share is NaN, never an index), no wall point, limit 0."""
-    from zfloc_stream.estimation import scoring
+    from zfloc_stream.estimation import distinct_poses, scoring
 
     f32 = np.zeros(0, np.float32)
     one = np.array([[0.0, 0.0, 0.0, 1.0]])
@@ -246,16 +246,16 @@ def test_scoring_kernels_on_no_points_no_models():
                                   z, z, z, z, ~empty, np.zeros(2, np.int64), 1, EMPTY2, np.zeros(4, np.uint8), 2, 2, 0.0,
                                   0.0, True, out)
     kept = np.zeros(0, np.int64)
-    assert scoring._greedy_distinct_kernel(np.zeros(0), np.zeros(0), np.zeros(0), 1.0, 0.1, 5, kept) == 0
+    assert distinct_poses._greedy_distinct_kernel(np.zeros(0), np.zeros(0), np.zeros(0), 1.0, 0.1, 5, kept) == 0
     kept = np.zeros(3, np.int64)
-    assert scoring._greedy_distinct_kernel(np.zeros(3), np.zeros(3), np.zeros(3), 1.0, 0.1, 0, kept) == 0
-    assert scoring._greedy_distinct_kernel(np.zeros(3), np.zeros(3), np.zeros(3), 1.0, 0.1, 3, kept) == 1
+    assert distinct_poses._greedy_distinct_kernel(np.zeros(3), np.zeros(3), np.zeros(3), 1.0, 0.1, 0, kept) == 0
+    assert distinct_poses._greedy_distinct_kernel(np.zeros(3), np.zeros(3), np.zeros(3), 1.0, 0.1, 3, kept) == 1
 
 
 def test_correlative_kernels_on_degenerate_scores():
     """_template, _pair_products, _row_maxima, _kth_largest, _pick: no cell, no placement
     column, fewer candidates than wanted, NaN scores."""
-    from zfloc_stream.estimation import correlative as co
+    from zfloc_stream.estimation import angle_search as co
 
     assert not co._template(np.zeros((0, 2), np.int64), 4, 6).any()
     F = np.zeros((0, 0), np.complex64)

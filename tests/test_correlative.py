@@ -4,9 +4,12 @@ plain per-angle float64 FFT returns, ties spread evenly over the tied placements
 import numpy as np
 import pytest
 
+from zfloc_stream.estimation import angle_search as A
 from zfloc_stream.estimation import correlative as C
 from zfloc_stream.sim import LaserSimSettings, build_scene, simulate_laser
 from zfloc_stream.geometry.sim2 import Sim2, wrap_angle
+
+from correlative_reference import correlative_models_reference
 
 LASER = LaserSimSettings(fov_deg=180.0, n_beams=180, max_range=10.0)
 
@@ -28,7 +31,7 @@ def test_fast_search_is_the_reference_bit_for_bit(scene_name, seed, n_frames, ce
     kw = dict(cell=cell, angle_step_deg=step, tolerance=0.3, peaks=peaks)
     for scale in (1.0, 0.93):
         fast = C.correlative_models(scene.floorplan, points, scale, **kw)
-        ref = C.correlative_models_reference(scene.floorplan, points, scale, **kw)
+        ref = correlative_models_reference(scene.floorplan, points, scale, **kw)
         assert fast.shape == ref.shape and np.array_equal(fast, ref)
 
 
@@ -40,13 +43,13 @@ def test_float32_counts_round_to_the_exact_counts_everywhere():
     side = 2 * half
     spectrum, shape, _ = C._mask_spectrum(scene.floorplan, 0.25, 0.3 + 0.125, half)
     n_i, n_j = shape[0] - side + 1, shape[1] - side + 1
-    H, W, M = C._fast_grid(spectrum, side, n_i, n_j)
+    H, W, M = A._fast_grid(spectrum, side, n_i, n_j)
     for theta in np.deg2rad([0.0, 37.0, 180.0, 271.0]):
-        ij = np.ascontiguousarray(C._angle_template(local, theta, 0.25, half))
-        exact = C._exact_scores(spectrum, ij, n_i, n_j)
-        spec = C._forward(ij, side, H, W)
-        C._pair_products(spec, M, M, np.zeros((0, 0), np.complex64))
-        fast = C._peaks(spec, n_i, n_j, W, 10)
+        ij = np.ascontiguousarray(A._angle_template(local, theta, 0.25, half))
+        exact = A._exact_scores(spectrum, ij, n_i, n_j)
+        spec = A._forward(ij, side, H, W)
+        A._pair_products(spec, M, M, np.zeros((0, 0), np.complex64))
+        fast = A._peaks(spec, n_i, n_j, W, 10)
         assert fast is not None
         best, counts = fast
         assert np.array_equal(exact[best], counts) and len(best) == 10
@@ -67,11 +70,11 @@ def test_a_templates_180_degree_turn_has_the_mirrored_spectrum(H, W):
     turned = (side - 1) - ij
     M = (rng.normal(size=(H, W // 2 + 1)) + 1j * rng.normal(size=(H, W // 2 + 1))).astype(np.complex64)
     empty = np.zeros((0, 0), np.complex64)
-    direct = C._forward(turned, side, H, W)
-    C._pair_products(direct, M, M, empty)  # the turned template's correlation spectrum
-    spec = C._forward(ij, side, H, W)
+    direct = A._forward(turned, side, H, W)
+    A._pair_products(direct, M, M, empty)  # the turned template's correlation spectrum
+    spec = A._forward(ij, side, H, W)
     mirrored = np.empty_like(spec)
-    C._pair_products(spec, M, M * C._mirror_phase(side, H, W), mirrored)
+    A._pair_products(spec, M, M * A._mirror_phase(side, H, W), mirrored)
     assert mirrored.shape == direct.shape
     assert np.abs(mirrored - direct).max() < 1e-3 * len(ij) * np.abs(M).max()
     # and it is not trivially so: the unturned template's spectrum is far from it
@@ -111,7 +114,7 @@ def test_a_masked_search_returns_only_searched_angles_and_all_angles_is_the_refe
     kw = dict(cell=0.25, angle_step_deg=4.0, tolerance=0.3, peaks=10)
     grid = np.deg2rad(np.arange(0.0, 360.0, 4.0))
     everything = C.correlative_models(scene.floorplan, points, angles=np.ones(len(grid), dtype=bool), **kw)
-    assert np.array_equal(everything, C.correlative_models_reference(scene.floorplan, points, **kw))
+    assert np.array_equal(everything, correlative_models_reference(scene.floorplan, points, **kw))
     mask = np.zeros(len(grid), dtype=bool)
     mask[[0, 1, 22, 23, 45, 46, 67, 68]] = True  # 0, 4, 88, 92 degrees and their turns
     models = C.correlative_models(scene.floorplan, points, angles=mask, **kw)
@@ -140,7 +143,7 @@ def test_a_grid_without_180_degree_turns_is_the_reference_too(scene_name, seed, 
     points = _points(scene, n_frames, seed)
     kw = dict(cell=0.25, angle_step_deg=7.0, tolerance=0.3, peaks=6)
     fast = C.correlative_models(scene.floorplan, points, **kw)
-    assert len(fast) > 0 and np.array_equal(fast, C.correlative_models_reference(scene.floorplan, points, **kw))
+    assert len(fast) > 0 and np.array_equal(fast, correlative_models_reference(scene.floorplan, points, **kw))
 
 
 def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
@@ -149,11 +152,11 @@ def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
     scene = build_scene("office", seed=0)
     points = _points(scene, 8, 0)
     kw = dict(cell=0.25, angle_step_deg=8.0, tolerance=0.3, peaks=10)
-    ref = C.correlative_models_reference(scene.floorplan, points, **kw)
+    ref = correlative_models_reference(scene.floorplan, points, **kw)
     calls = []
-    exact = C._exact_peaks
-    monkeypatch.setattr(C, "_exact_peaks", lambda *a: calls.append(1) or exact(*a))
-    monkeypatch.setattr(C, "_ROUNDING_SLACK", -1.0)
+    exact = A._exact_peaks
+    monkeypatch.setattr(A, "_exact_peaks", lambda *a: calls.append(1) or exact(*a))
+    monkeypatch.setattr(A, "ROUNDING_SLACK", -1.0)
     assert np.array_equal(C.correlative_models(scene.floorplan, points, **kw), ref)
     assert len(calls) == 45  # every angle
     monkeypatch.undo()
@@ -167,7 +170,7 @@ def test_the_search_falls_back_to_the_exact_pass(monkeypatch):
     pts = np.array([[0.1, 0.1], [1.4, 0.1], [1.4, 1.4], [0.1, 1.4], [0.7, 0.1], [0.1, 0.8]])
     kw = dict(cell=0.25, angle_step_deg=30.0, tolerance=0.3, peaks=400)
     found = C.correlative_models(room, pts, **kw)
-    assert len(found) > 0 and np.array_equal(found, C.correlative_models_reference(room, pts, **kw))
+    assert len(found) > 0 and np.array_equal(found, correlative_models_reference(room, pts, **kw))
 
 
 def test_peak_picking_spreads_ties_like_linspace():
@@ -178,7 +181,7 @@ def test_peak_picking_spreads_ties_like_linspace():
             score[3:, 0] = 2.0
             if per_angle > n_tied + 3 or per_angle <= 3:
                 continue
-            best, counts, ok = C._pick(score, 1, per_angle, 0.25)
+            best, counts, ok = A._pick(score, 1, per_angle, 0.25)
             spread = 3 + np.round(np.linspace(0, n_tied - 1, per_angle - 3)).astype(np.int64)
             assert ok and np.array_equal(best, np.concatenate([[0, 1, 2], spread]))
             assert np.array_equal(counts, np.where(best < 3, 5.0, 2.0))
@@ -189,16 +192,16 @@ def test_peak_picking_refuses_what_it_cannot_vouch_for():
     score[4, 7] = 9.0
     score[11, 2] = 8.0
     score[15, 29] = 8.0
-    assert C._pick(score, 30, 3, 0.25)[2]
-    assert np.array_equal(C._pick(score, 30, 3, 0.25)[0], [4 * 30 + 7, 11 * 30 + 2, 15 * 30 + 29])
+    assert A._pick(score, 30, 3, 0.25)[2]
+    assert np.array_equal(A._pick(score, 30, 3, 0.25)[0], [4 * 30 + 7, 11 * 30 + 2, 15 * 30 + 29])
     off = score.copy()
     off[11, 2] = 8.3  # a candidate 0.3 off its integer
-    assert not C._pick(off, 30, 3, 0.25)[2]
+    assert not A._pick(off, 30, 3, 0.25)[2]
     for bad in (np.nan, np.inf, -np.inf):
         broken = score.copy()
         broken[17, 5] = bad  # not a candidate, but the pass cannot be trusted
-        assert not C._pick(broken, 30, 3, 0.25)[2]
-    best, counts, ok = C._pick(score, 8, 2, 0.25)  # the columns past n_j are ignored, not read as placements
+        assert not A._pick(broken, 30, 3, 0.25)[2]
+    best, counts, ok = A._pick(score, 8, 2, 0.25)  # the columns past n_j are ignored, not read as placements
     assert ok and np.array_equal(best, [4 * 8 + 7, 11 * 8 + 2]) and np.array_equal(counts, [9.0, 8.0])
 
 

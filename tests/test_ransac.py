@@ -13,7 +13,7 @@ from zfloc_stream.errors import InputError
 from zfloc_stream.estimation import Hypothesis, LocalizationResult, localize
 from zfloc_stream.estimation.correspondences import BevSamples, floorplan_matches
 from zfloc_stream.estimation.model_generation import guided_models, solver_pool
-from zfloc_stream.estimation.scoring import implied_poses
+from zfloc_stream.estimation.views import implied_poses
 from zfloc_stream.plans.floorplan import Floorplan
 from zfloc_stream.geometry.shapes import CircleSet, LineSet
 from zfloc_stream.observation import BevObservation

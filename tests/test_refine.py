@@ -10,7 +10,7 @@ from plan_helpers import building, observe  # synthetic floorplan + BEV helpers
 
 from zfloc_stream.settings.loading import RefineSettings
 from zfloc_stream.estimation.field_fit import refine_batch
-from zfloc_stream.estimation.scoring import FaceField
+from zfloc_stream.estimation.face_field import FaceField
 from zfloc_stream.geometry.sim2 import Sim2
 
 TRUTH = Sim2(1.1, 0.7, (3.0, -2.0))

@@ -8,9 +8,9 @@ from scipy.ndimage import distance_transform_edt
 from zfloc_stream.settings.loading import ScoringSettings
 from zfloc_stream.geometry.shapes import LineSet
 from zfloc_stream.observation import BevObservation
+from zfloc_stream.estimation.distinct_poses import distinct
 from zfloc_stream.estimation.scoring import (
     BevView,
-    distinct,
     floorplan_scorer,
     rank_coarse_to_fine,
     score_hypotheses,

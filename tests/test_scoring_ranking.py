@@ -6,7 +6,7 @@ duplicates."""
 import numpy as np
 
 from zfloc_stream.settings.loading import ScoringSettings
-from zfloc_stream.estimation.scoring import descending_prefix, distinct, top_distinct
+from zfloc_stream.estimation.distinct_poses import descending_prefix, distinct, top_distinct
 from zfloc_stream.runtime.ties import descending
 
 

@@ -11,7 +11,7 @@ from localizer_helpers import estimate_bits, run_localizer, settings_with
 from zfloc_stream.runtime import threads
 from zfloc_stream.errors import ConfigError
 from zfloc_stream.estimation import field_fit
-from zfloc_stream.estimation import correlative, model_generation, scoring, solvers
+from zfloc_stream.estimation import angle_search, model_generation, scoring, solvers
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 
@@ -87,7 +87,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring, field_fit, solvers, correlative):
+    for module in (scoring, field_fit, solvers, angle_search):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .geometry.grid import Grid
 from .geometry.shapes import CircleSet, LineSet
 
 
@@ -36,14 +37,14 @@ class BevObservation:
         if self.free.shape != self.clearance.shape:
             raise InputError("BEV free mask and clearance field differ in shape")
 
+    @property
+    def grid(self) -> Grid:
+        """The BEV's cells (grid.py's convention)."""
+        return Grid(self.origin, self.resolution, self.free.shape)
+
     def cells(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(row, col, inside) of the cells holding the given (N, 2) points."""
-        p = (np.asarray(points, dtype=float) - self.origin) / self.resolution
-        col = np.floor(p[:, 0]).astype(np.int64)
-        row = np.floor(p[:, 1]).astype(np.int64)
-        h, w = self.free.shape
-        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
-        return np.clip(row, 0, h - 1), np.clip(col, 0, w - 1), inside
+        return self.grid.cells(points)
 
     def free_at(self, points) -> np.ndarray:
         row, col, inside = self.cells(points)

@@ -11,20 +11,24 @@ loss, and method="trf" with loss="huber" spends ~0.8 ms of per-iteration overhea
 4-parameter problem (6-9 ms per hypothesis), several times the cost of the residual
 itself. One LM step here is one 4x4 solve on J^T W J.
 Algorithm: weights w_i = min(1, delta / |r_i|) (the Huber IRLS weights), step
-(H + lambda diag H) dp = -g with H = J^T W J, g = J^T W r; a step is accepted only if the
+(H + lambda diag(max(diag H, 1e-12))) dp = -g with H = J^T W J, g = J^T W r; a step is accepted only if the
 Huber cost decreases (lambda / factor), otherwise lambda * factor and retry. With
 refine.outlier_distance > 0 the loss is truncated there (weight 0 beyond it), so points
 that no floorplan wall explains (a room the map lacks, clutter) stop pulling the fit.
 
 The field is given by the caller: the estimator (estimation/ransac.py, model_generation.py,
-local_refinement.py) passes the wall-SURFACE field (scoring.FaceField) rather than the
+local_refinement.py) passes the wall-SURFACE field (face_field.FaceField) rather than the
 floorplan's f^c, which is 0 inside thick walls and so lets a BEV scaled a few percent too
 large rest inside them; the laser scan matcher (frontend/scan_match.py) passes its own field
-of the BEV's walls. Values are bilinear between cell centres, as in Floorplan.distance; the
-Jacobian is analytic: the gradient of the bilinear interpolant chained with
-d x' / d(tx, ty, theta, log s) = (e_x, e_y, perp(s R x), s R x). In fixed-scale mode
-log s is held constant (3 parameters); otherwise it is clamped to the solvers' scale
-bounds (shrinking the BEV onto one wall would otherwise drive every residual to zero).
+of the BEV's walls, and the offline correlative_search (correlative.py) the floorplan itself.
+Values are bilinear between cell centres plus the distance to the grid outside it
+(geometry/bilinear.py's bilinear_and_gradient_at, the difference form that shares its terms
+with the gradient; Floorplan.distance reads the same interpolant in the corner-weight form,
+equal to a few ulps). The Jacobian is analytic: the gradient of the bilinear interpolant
+chained with d x' / d(tx, ty, theta, log s) = (e_x, e_y, perp(s R x), s R x). In
+fixed-scale mode log s is held constant (3 parameters); otherwise it is clamped to the
+solvers' scale bounds (shrinking the BEV onto one wall would otherwise drive every
+residual to zero).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import numpy as np
 from ..runtime import threads
 from ..settings.loading import RefineSettings, ScaleMode
 from ..runtime.numba_support import njit
+from ..geometry.bilinear import bilinear_and_gradient_at, bilinear_and_gradient_lookup, centre_coordinates
 
 
 def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
@@ -48,37 +53,18 @@ def thin_points(points: np.ndarray, max_points: int) -> np.ndarray:
 
 def field_value_and_gradient(floorplan, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A distance field (`floorplan`: anything with distance_field, origin and resolution)
-    at points q (N, 2), interpolated as Floorplan.distance interpolates f^c (bilinear between
-    cell centres; outside the grid the edge value plus the distance to the grid, though with
-    the products in another order, so the last bits may differ), and its gradient (N, 2)
-    (that of the bilinear interpolant; the outside term is left out), in one pass over the
-    four neighbouring cells."""
-    value, gu, gv = _field_value_and_gradient_xy(floorplan, q[:, 0], q[:, 1])
-    return value, np.stack([gu, gv], axis=1)
-
-
-def _field_value_and_gradient_xy(floorplan, qx: np.ndarray, qy: np.ndarray):
-    """field_value_and_gradient for coordinates given as two arrays (any shape)."""
-    grid = np.asarray(floorplan.distance_field)
-    h, w = grid.shape
-    field = grid.ravel()  # a view for the (C-contiguous) field: no copy per call
-    res = float(floorplan.resolution)
-    u = (qx - floorplan.origin[0]) / res - 0.5
-    v = (qy - floorplan.origin[1]) / res - 0.5
-    uc, vc = np.clip(u, 0.0, w - 1.0), np.clip(v, 0.0, h - 1.0)
-    c0 = np.minimum(uc.astype(np.int64), w - 2)
-    r0 = np.minimum(vc.astype(np.int64), h - 2)
-    fu, fv = uc - c0, vc - r0
-    i = r0 * w + c0
-    f00, f01, f10, f11 = field[i], field[i + 1], field[i + w], field[i + w + 1]
-    bottom = f00 + (f01 - f00) * fu
-    top = f10 + (f11 - f10) * fu
-    value = bottom + (top - bottom) * fv + np.hypot(u - uc, v - vc) * res
-    gu = (f01 - f00) + (f11 - f10 - f01 + f00) * fv
-    gv = top - bottom
-    gu = np.where(u == uc, gu, 0.0) / res
-    gv = np.where(v == vc, gv, 0.0) / res
-    return value, gu, gv
+    at points q (N, 2) and its gradient (N, 2): the LM's residuals and their gradient,
+    geometry/bilinear.py's difference form (bilinear between cell centres; outside the grid
+    the edge value plus the distance to the grid, whose gradient is left out), compiled,
+    in one pass over the four neighbouring cells. A NaN point reads NaN."""
+    field = np.ascontiguousarray(floorplan.distance_field)
+    h, w = field.shape
+    q = np.asarray(q, dtype=float).reshape(-1, 2)
+    value, gx, gy = np.empty(len(q)), np.empty(len(q)), np.empty(len(q))
+    bilinear_and_gradient_lookup(field.ravel(), h, w, float(floorplan.origin[0]), float(floorplan.origin[1]),
+                                 float(floorplan.resolution), np.ascontiguousarray(q[:, 0]), np.ascontiguousarray(q[:, 1]),
+                                 value, gx, gy)
+    return value, np.stack([gx, gy], axis=1)
 
 
 def huber_cost(r: np.ndarray, delta: float, cutoff: float = 0.0) -> np.ndarray:
@@ -152,9 +138,9 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
     (scratch: (5, BLOCK)).
 
     field is the distance field raveled (h rows of w cells); per point, the residual and its
-    gradient are _field_value_and_gradient_xy's arithmetic, operation for operation (a
-    float32 field's differences stay float32, as there). Returns NaN (the trial is then
-    rejected) when a transformed point is NaN."""
+    gradient are geometry/bilinear.py's bilinear_and_gradient_at, the same code as
+    field_value_and_gradient. Returns NaN (the trial is then rejected) when a transformed
+    point is NaN."""
     s = math.exp(log_s)
     c = math.cos(theta)
     sn = math.sin(theta)
@@ -171,47 +157,14 @@ def _evaluate(field, w, h, ox, oy, res, pts, tx, ty, theta, log_s, free_scale, d
             y = pts[k, 1]
             rx = s * (c * x - sn * y)
             ry = s * (sn * x + c * y)
-            u = (rx + tx - ox) / res - 0.5
-            v = (ry + ty - oy) / res - 0.5
+            u, v = centre_coordinates(rx + tx, ry + ty, ox, oy, res)
             if u != u or v != v:
                 return np.nan  # casting NaN to a cell index is undefined: no lookup
-            # np.clip(u, 0, w - 1) and np.clip(v, 0, h - 1)
-            uc = u
-            if uc < 0.0:
-                uc = 0.0
-            elif uc > w - 1.0:
-                uc = w - 1.0
-            vc = v
-            if vc < 0.0:
-                vc = 0.0
-            elif vc > h - 1.0:
-                vc = h - 1.0
-            c0 = np.int64(uc)  # truncation of a non-negative value, as astype(int64)
-            if c0 > w - 2:
-                c0 = w - 2
-            r0 = np.int64(vc)
-            if r0 > h - 2:
-                r0 = h - 2
-            fu = uc - c0
-            fv = vc - r0
-            i = r0 * w + c0
-            f00 = field[i]
-            f01 = field[i + 1]
-            f10 = field[i + w]
-            f11 = field[i + w + 1]
-            bottom = f00 + (f01 - f00) * fu
-            top = f10 + (f11 - f10) * fu
-            r = bottom + (top - bottom) * fv
-            # the distance to the grid (hypot(0, 0) * res = +0.0 inside it; the libm call is skipped)
-            r += math.hypot(u - uc, v - vc) * res if u != uc or v != vc else 0.0
-            gu = (f01 - f00) + (f11 - f10 - f01 + f00) * fv
-            gv = top - bottom
+            r, gx, gy = bilinear_and_gradient_at(field, h, w, res, u, v)
             j = k - start
             scratch[0, j] = r
-            # outside the grid the gradient of the edge-distance term is left out, as in
-            # _field_value_and_gradient_xy
-            scratch[1, j] = (gu if u == uc else 0.0) / res
-            scratch[2, j] = (gv if v == vc else 0.0) / res
+            scratch[1, j] = gx
+            scratch[2, j] = gy
             scratch[3, j] = rx
             scratch[4, j] = ry
         # stage 2: Jacobian rows, weights, cost and the normal equations
@@ -389,7 +342,7 @@ def refine_batch(
     threads (threads.py). Rows that cannot be refined come back unchanged.
 
     field: anything with distance_field, origin and resolution (a Floorplan, or the
-    estimator's wall-face field, scoring.FaceField)."""
+    estimator's wall-face field, face_field.FaceField)."""
     models, out, pts, free_scale, lo, hi, log_s, ok = refinable(points, models, settings, scale_mode, scale_bounds)
     if len(pts) < 4 or not ok.any():
         return out

@@ -59,7 +59,8 @@ from ..runtime.ties import descending, tie_keys
 from .correspondences import BevSamples, floorplan_matches, settings_of
 from .model_generation import correlative_seeds, guided_models, models_2c, models_2l, models_3l, models_lc, solver_pool
 from .results import CORRELATIVE, GUIDED, WARM, Hypothesis, LocalizationResult, alignment_of, model_rows
-from .scoring import distinct, floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
+from .distinct_poses import distinct
+from .scoring import floorplan_scorer, rank_coarse_to_fine, score_hypotheses, sparse_line_points
 from .views import BevView
 from ..prior import PRIOR, BoundPrior
 
@@ -166,7 +167,7 @@ def localize(
     places it names are never crowded out and the best place elsewhere is still known.
 
     Runs its independent pieces on estimator.threads threads (threads.py), unless the
-    caller set the round's thread count already (round_scheduler.run_round)."""
+    caller set the round's thread count already (stream/scheduler.py's run_round)."""
     with threads.limit(threads.resolve(settings.threads), unless_set=True):
         return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search, prior)
 

@@ -24,8 +24,9 @@ The three scores are compiled loops (numba) over hypotheses and points: per poin
 float operations are element-wise (the same cell, the same test on any thread count), and
 what is summed are integer counts (and the coarse grid's uint8 levels), exact in any
 order. A call over many hypotheses is split into ranges of them, one per thread the round
-was given (threads.py), each writing its own slots: the same bits. The torch backend
-(scoring_torch.py) computes the same scores on tensors.
+was given (threads.py), each writing its own slots: the same bits. These kernels are what
+`scoring.backend: numpy` selects (the setting's name is older than the kernels). The torch
+backend (scoring_torch.py) computes the same scores on tensors.
 """
 
 from __future__ import annotations
@@ -41,10 +42,12 @@ from ..settings.loading import ScoringSettings
 from ..errors import InputError
 from ..geometry.shapes import LineSet
 from ..observation import BevObservation
-from .views import COARSE_FAR, DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (transform_points: public here too)
-from ..geometry.sim2 import wrap_angle
+from .views import COARSE_FAR, DEEP_FREE, FREE, BevView, implied_poses, transform_points  # noqa: F401 (implied_poses, transform_points: public here too)
 from ..runtime.numba_support import njit
-from ..runtime.ties import descending, tie_keys
+from ..geometry.bilinear import bilinear_at, centre_coordinates
+from ..runtime.ties import descending
+from .distinct_poses import top_distinct
+from .face_field import FaceField
 from .plan_cache import cached_per_floorplan
 
 # --------------------------------------------------------------------------------------
@@ -53,54 +56,6 @@ from .plan_cache import cached_per_floorplan
 
 
 COARSE_BLOCK_ROWS = 512  # rows of the coarse grid quantised at once (bounds the float64 temporaries)
-MIN_INSIDE_SHARE = 0.25  # enclosed free space below this share of all free space is not "the inside"
-
-
-@dataclass(frozen=True)
-class FaceField:
-    """Distance to the nearest wall surface seen from inside the building, i.e. to a FACE
-    cell (a wall cell next to an inside non-wall cell) less half a cell, on the
-    floorplan's grid; same attributes as the floorplan's own field so the refinement can
-    read either.
-
-    The floorplan's f^c measures to any wall cell, so it is 0 inside a thick wall: a
-    hypothesis whose scale pushes BEV walls into the walls' interiors (up to a wall
-    thickness, 0.15-0.25 m) costs nothing in Cc nor in the LM residuals. BEV wall points
-    are wall surfaces, and so are faces: measured to faces, that slack disappears. Used
-    for the coarse ranking and the refinement; the full score keeps the paper's f^c."""
-
-    distance_field: np.ndarray
-    origin: np.ndarray
-    resolution: float
-
-    @classmethod
-    def of(cls, floorplan) -> FaceField:
-        from scipy import ndimage  # here, not at import: a CLI error must not pay for it
-
-        res = float(floorplan.resolution)
-        origin = np.asarray(floorplan.origin, dtype=float)
-        occupied = getattr(floorplan, "occupied", None)
-        occupied = np.asarray(floorplan.distance_field) == 0 if occupied is None else np.asarray(occupied, dtype=bool)
-        free = ~occupied
-        # Faces seen from inside: free space connected to the grid border is outside the
-        # building and nobody observes the outer faces of exterior walls, so they are left
-        # out (otherwise a BEV scaled too large snaps onto them, a wall thickness away).
-        labels, _ = ndimage.label(free)
-        border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-        inside = free & ~np.isin(labels, border[border > 0])
-        # An open plan, or a map built from scans (its interior leaks into the unknown
-        # around it through doorways and gaps, so only small pockets look enclosed):
-        # every face counts. MIN_INSIDE_SHARE is a ratio of areas, not a tuned distance.
-        seen_from = inside if inside.sum() >= MIN_INSIDE_SHARE * free.sum() else free
-        faces = occupied & ndimage.binary_dilation(seen_from)
-        if not faces.any():
-            return cls(np.asarray(floorplan.distance_field), origin, res)
-        # A face cell's centre lies half a cell inside the wall; the wall surface the
-        # sensor sees is its edge, so the distance to the surface is about half a cell
-        # less (without this, refined scales come out ~1-2 % large in small rooms).
-        field = ndimage.distance_transform_edt(~faces, sampling=res)
-        field -= 0.5 * res  # in place: a large plan's field is ~300 MB
-        return cls(np.maximum(field, 0.0, out=field), origin, res)
 
 
 # --------------------------------------------------------------------------------------
@@ -112,15 +67,6 @@ class FaceField:
 # least this many point lookups (~0.2 ms): handing a piece to a worker costs ~0.05 ms
 _MIN_LOOKUPS_PER_THREAD = 200_000
 _MIN_VIOLATION_MODELS_PER_THREAD = 64  # violation: a model reads the floorplan walls under its footprint
-
-# Greedy distinct-pose suppression runs on a prefix of the ranked models (it never looks
-# ahead, so a prefix yields the same first survivors as the whole list). The first prefix
-# holds PREFIX_PER_KEPT models per wanted survivor, at least PREFIX_MIN, and grows
-# PREFIX_GROWTH-fold while it yields too few: work sizes only, the result does not depend on them.
-PREFIX_MIN = 256
-PREFIX_PER_KEPT = 16
-PREFIX_GROWTH = 4
-
 
 def _model_ranges(n_models: int, n_points: int) -> list[tuple[int, int]]:
     return threads.ranges(n_models, _MIN_LOOKUPS_PER_THREAD // max(1, n_points) + 1)
@@ -173,7 +119,8 @@ def _coarse_kernel(models, inv, ox, oy, px, py, grid, h, w, index_type, out):
 @njit
 def _consistency_kernel(a, b, tx, ty, px, py, field, h, w, ox, oy, res, tau_c, out):
     """FloorplanScorer.consistency for every model: the points mapped by x' = s R x + t
-    (a = s cos, b = s sin), f^c by Floorplan.distance's bilinear lookup, out = the share
+    (a = s cos, b = s sin), f^c by Floorplan.distance's bilinear lookup (the same compiled
+    bilinear_at, geometry/bilinear.py), out = the share
     below tau_c. False (out unfinished) when a mapped point is not finite, where
     Floorplan.distance raises."""
     n = px.shape[0]
@@ -185,22 +132,8 @@ def _consistency_kernel(a, b, tx, ty, px, py, field, h, w, ox, oy, res, tau_c, o
             y = bi * px[j] + ai * py[j] + tyi
             if not (math.isfinite(x) and math.isfinite(y)):
                 return False
-            u = (x - ox) / res - 0.5
-            v = (y - oy) / res - 0.5
-            uc = min(max(u, 0.0), w - 1.0)
-            vc = min(max(v, 0.0), h - 1.0)
-            c0 = min(np.int64(uc), w - 2)
-            r0 = min(np.int64(vc), h - 2)
-            fu = uc - c0
-            fv = vc - r0
-            k = r0 * w + c0
-            top = field[k] * (1.0 - fu) + field[k + 1] * fu
-            bottom = field[k + w] * (1.0 - fu) + field[k + w + 1] * fu
-            value = top * (1.0 - fv) + bottom * fv
-            # outside the grid: plus the distance to it. Inside, numpy adds hypot(0, 0) = 0,
-            # which cannot change the comparison (value >= 0), so the call is skipped.
-            if u != uc or v != vc:
-                value = value + math.hypot(u - uc, v - vc) * res
+            u, v = centre_coordinates(x, y, ox, oy, res)
+            value = bilinear_at(field, h, w, res, u, v)
             if value < tau_c:
                 below += 1
         out[i] = below / n
@@ -235,79 +168,6 @@ def _violation_kernel(tx, ty, c, sn, k, c0, c1, r0, r1, empty, bucket_start, n_c
                     n_seen += 1
         if n_seen > 0:
             out[i] = n_bad / n_seen
-
-
-@njit
-def _greedy_distinct_kernel(x, y, ang, max_distance, max_angle, limit, kept):
-    """Greedy suppression: walks the hypotheses in order and keeps one unless a kept one
-    lies within max_distance (hypot of the implied-position difference) and max_angle
-    (|wrap_angle| of the heading difference), until `limit` are kept; returns how many
-    (their indices in kept)."""
-    two_pi = 2.0 * np.pi
-    n_kept = 0
-    for j in range(x.shape[0]):
-        if n_kept >= limit:
-            break
-        alone = True
-        for k in range(n_kept):
-            i = kept[k]
-            # wrap_angle(ang[j] - ang[i]) = (d + pi) % (2 pi) - pi
-            if math.hypot(x[j] - x[i], y[j] - y[i]) < max_distance and \
-                    abs((ang[j] - ang[i] + np.pi) % two_pi - np.pi) < max_angle:
-                alone = False
-                break
-        if alone:
-            kept[n_kept] = j
-            n_kept += 1
-    return n_kept
-
-
-def descending_prefix(values: np.ndarray, length: int) -> np.ndarray:
-    """The first entries, at least `length` of them (all when there are fewer values), of
-    ties.descending(values), the same indices in the same order, without sorting
-    everything.
-
-    descending orders by (-tie_keys(values), index), stably. With v the length-th smallest
-    key (np.partition), the indices whose key is <= v are exactly a prefix of that order
-    (every other key is larger, or NaN, which sorts last), and sorting them stably, in index
-    order, by key orders them as descending does. Ties at v are all taken, so the prefix
-    may be longer than `length`."""
-    keys = -tie_keys(values)
-    if length >= len(keys):
-        return np.argsort(keys, kind="stable")
-    v = np.partition(keys, length - 1)[length - 1]
-    if np.isnan(v):  # fewer than `length` non-NaN keys: NaNs order among themselves by index
-        return np.argsort(keys, kind="stable")
-    candidates = np.flatnonzero(keys <= v)
-    return candidates[np.argsort(keys[candidates], kind="stable")]
-
-
-def top_distinct(models: np.ndarray, coarse: np.ndarray, anchor: np.ndarray, settings) -> np.ndarray:
-    """rank_coarse_to_fine's choice, order[distinct(models[order], anchor, settings,
-    settings.top_k)] with order = descending(coarse), the same indices in the same order.
-
-    Greedy suppression never looks ahead, so the first top_k survivors depend only on the
-    order's prefix up to the last of them (distinct itself grows its block on that
-    ground): only a prefix of the order is computed (descending_prefix), only its implied
-    poses (implied_poses row by row, the same numbers as on the whole list) and the
-    greedy pass runs compiled. The prefix grows 4x while it yields fewer than top_k."""
-    models = np.asarray(models, dtype=float).reshape(-1, 4)
-    n, limit = len(models), int(settings.top_k)
-    if n == 0 or limit <= 0:
-        return np.zeros(0, dtype=np.int64)
-    max_angle = float(np.deg2rad(settings.distinct_angle_deg))
-    length = min(n, max(PREFIX_MIN, PREFIX_PER_KEPT * limit))
-    while True:
-        order = descending_prefix(coarse, length)
-        rows = models[order]
-        pos, ang = implied_poses(rows, anchor)
-        kept = np.empty(limit, dtype=np.int64)
-        count = _greedy_distinct_kernel(np.ascontiguousarray(pos[:, 0]), np.ascontiguousarray(pos[:, 1]),
-                                        np.ascontiguousarray(ang), float(settings.distinct_translation),
-                                        max_angle, limit, kept)
-        if count >= limit or len(order) >= n:
-            return order[kept[:count]]
-        length = min(n, PREFIX_GROWTH * len(order))
 
 
 class FloorplanScorer:
@@ -466,7 +326,8 @@ def floorplan_scorer(floorplan, settings: ScoringSettings) -> FloorplanScorer:
 
 def scoring_kernels(floorplan, settings: ScoringSettings):
     """What computes the scores, chosen by scoring.backend: the cached FloorplanScorer and
-    its compiled kernels ("numpy": the CPU backend), or its tensors on scoring.device
+    its compiled numba kernels on the CPU ("numpy", a name older than the kernels, kept so
+    existing configs stay valid: no numpy array code scores), or its tensors on scoring.device
     ("torch", built once per scorer and device). Both have coarse_consistency,
     consistency and violation with the same arguments."""
     scorer = floorplan_scorer(floorplan, settings)
@@ -522,29 +383,6 @@ def score_hypotheses(floorplan, obs: BevObservation | BevView, models, settings:
     cc = scorer.consistency(models, bev.wall_points, settings.tau_c, settings.chunk_size)
     cv = scorer.violation(models, bev, settings.tau_v, settings.chunk_size, settings.violation_per)
     return Scores(cc - settings.violation_weight * cv, cc, cv)
-
-
-def distinct(models: np.ndarray, anchor: np.ndarray, settings: ScoringSettings, limit: int | None = None) -> np.ndarray:
-    """Indices (in the given order, which must be best first) of hypotheses kept by greedy
-    suppression: a hypothesis is dropped when a better kept one implies a BEV-anchor
-    position within distinct_translation AND a heading within distinct_angle_deg."""
-    models = np.asarray(models, dtype=float).reshape(-1, 4)
-    n = len(models)
-    limit = n if limit is None else int(limit)
-    if n == 0 or limit <= 0:
-        return np.zeros(0, dtype=np.int64)
-    pos, ang = implied_poses(models, anchor)
-    max_angle = np.deg2rad(settings.distinct_angle_deg)
-    # Greedy suppression in order never looks ahead, so running it on a prefix gives the
-    # same first survivors as on the whole list: grow the prefix only when it runs dry.
-    block = min(n, max(PREFIX_MIN, PREFIX_PER_KEPT * limit))
-    kept = np.empty(limit, dtype=np.int64)
-    x, y, ang = (np.ascontiguousarray(a) for a in (pos[:, 0], pos[:, 1], ang))
-    while True:
-        count = _greedy_distinct_kernel(x[:block], y[:block], ang[:block], float(settings.distinct_translation), float(max_angle), limit, kept)
-        if count >= limit or block >= n:
-            return kept[:count].copy()
-        block = min(n, PREFIX_GROWTH * block)
 
 
 @dataclass(frozen=True)

@@ -90,7 +90,10 @@ class TorchScorer:
 
     # ---- full Cc -------------------------------------------------------------------------
     def _distance(self, q):
-        """Floorplan.distance on a (M, 2) float64 tensor (bilinear; outside: nearest + gap)."""
+        """Floorplan.distance on a (M, 2) float64 tensor (bilinear; outside: nearest + gap).
+        geometry/bilinear.py's bilinear_at written again in tensor operations, on purpose:
+        the compiled scalar code runs on the CPU only, and this runs where the tensors are
+        (a GPU), over every (model, point) pair at once. Same expressions, same order."""
         torch = self.torch
         h, w = self._field_shape
         u = (q[:, 0] - self._field_origin[0]) / self._field_resolution - 0.5

@@ -27,6 +27,7 @@ import numpy as np
 from ..settings.loading import BevSettings, RefineSettings
 from ..estimation.field_fit import field_value_and_gradient, huber_cost, refine_batch, thin_points
 from ..runtime.numba_support import njit
+from ..geometry.grid import Grid
 from ..geometry.sim2 import wrap_angle
 
 
@@ -128,11 +129,9 @@ def _residuals(grid: GridField, points: np.ndarray) -> np.ndarray:
 
 
 def _share_near(grid: GridField, points: np.ndarray, distance: float) -> float:
-    cells = np.floor((points - grid.origin) / grid.resolution).astype(np.int64)
-    h, w = grid.distance_field.shape
-    inside = (cells[:, 0] >= 0) & (cells[:, 0] < w) & (cells[:, 1] >= 0) & (cells[:, 1] < h)
+    row, col, inside = Grid(grid.origin, grid.resolution, grid.distance_field.shape).cells(points)
     d = np.full(len(points), np.inf)
-    d[inside] = grid.distance_field[cells[inside, 1], cells[inside, 0]]
+    d[inside] = grid.distance_field[row[inside], col[inside]]
     return float(np.mean(d < distance))
 
 

@@ -29,6 +29,7 @@ import yaml
 
 from ..settings.loading import Settings
 from ..errors import FloorplanError, InputError
+from ..geometry.grid import Grid
 from ..geometry.shapes import CircleSet, LineSet, as_points, grid_subsample
 from .raster_files import (
     GIBSON_RESOLUTION,
@@ -131,6 +132,7 @@ class Floorplan:
             raise FloorplanError(f"floorplan {name!r}: the plan reaches {np.abs(extent).max():.3g} m from 0: not a place on Earth")
         self.occupied = occ.astype(bool)
         self.occupied.setflags(write=False)
+        self.grid = Grid(self.origin, self.resolution, self.occupied.shape)  # cells, centres, the bilinear f^c
         self.unknown = None  # None: every non-wall cell is free
         if unk is not None:
             if (unk & ~self.occupied).any():
@@ -281,45 +283,28 @@ class Floorplan:
 
     def world_to_cell(self, points) -> tuple[np.ndarray, np.ndarray]:
         """(row, col) integer indices of the cells holding (N, 2) points (may lie outside)."""
-        p = (as_points(points) - self.origin) / self.resolution
-        return np.floor(p[:, 1]).astype(np.int64), np.floor(p[:, 0]).astype(np.int64)
+        return self.grid.cell_of(as_points(points))
 
     def cell_to_world(self, rows, cols) -> np.ndarray:
         """(N, 2) metric centres of cells."""
-        rows, cols = np.asarray(rows, dtype=float), np.asarray(cols, dtype=float)
-        return np.stack([self.origin[0] + (cols + 0.5) * self.resolution, self.origin[1] + (rows + 0.5) * self.resolution], axis=-1)
+        return np.stack(self.grid.centres(np.asarray(rows, dtype=float), np.asarray(cols, dtype=float)), axis=-1)
 
     def contains(self, points) -> np.ndarray:
-        row, col = self.world_to_cell(points)
-        h, w = self.shape
-        return (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        return self.grid.inside(*self.world_to_cell(points))
 
     # ----------------------------------------------------------------------------------
     # f^c lookup
     # ----------------------------------------------------------------------------------
     def distance(self, points) -> np.ndarray:
         """f^c at (N, 2) metric points: bilinear between cell centres. Outside the grid: the
-        value at the nearest grid point plus the distance to it (finite, grows outward)."""
+        value at the nearest grid point plus the distance to it (finite, grows outward).
+        The grid's one compiled lookup (geometry/bilinear.py), as the scores read f^c."""
         p = np.asarray(points, dtype=float)
         if p.ndim != 2 or p.shape[-1] != 2:
             p = as_points(p)
         if not np.isfinite(p).all():
             raise InputError("points passed to Floorplan.distance contain NaN or inf")
-        h, w = self.shape
-        u = (p[:, 0] - self.origin[0]) / self.resolution - 0.5
-        v = (p[:, 1] - self.origin[1]) / self.resolution - 0.5
-        uc = np.clip(u, 0.0, w - 1.0)
-        vc = np.clip(v, 0.0, h - 1.0)
-        c0 = np.minimum(uc.astype(np.int64), w - 2)
-        r0 = np.minimum(vc.astype(np.int64), h - 2)
-        fu, fv = uc - c0, vc - r0
-        i = r0 * w + c0
-        f = self._flat_field
-        top = f[i] * (1.0 - fu) + f[i + 1] * fu
-        bottom = f[i + w] * (1.0 - fu) + f[i + w + 1] * fu
-        value = top * (1.0 - fv) + bottom * fv
-        outside = np.hypot(u - uc, v - vc) * self.resolution
-        return value + outside
+        return self.grid.bilinear(self.distance_field, p)
 
     # ----------------------------------------------------------------------------------
     # primitives

@@ -3,7 +3,8 @@
 from .from_floorplan import build_scene_from_floorplan
 from .layout import Connection, Room, snap
 from .render import camera_pose, intrinsics, render
-from .scenes import SCENES, Scene, build_scene, make_scene
+from .builtin_scenes import SCENES, build_scene
+from .scenes import Scene, make_scene
 from .simulator import (LaserSequence, LaserSimSettings, SimSequence, SimSettings, drift_odometry, simulate,
                         simulate_laser)
 from .trajectory import WalkSettings, plan_path, random_walk, trajectory_through

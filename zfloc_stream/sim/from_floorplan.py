@@ -22,7 +22,8 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import FloorplanError
-from .layout import Grid, Room
+from ..geometry.grid import Grid
+from .layout import Room
 from .scenes import Scene
 
 WALL_HEIGHT = 2.7  # m

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.grid import Grid
+
 RESOLUTION = 0.05  # m per floorplan cell (fixed for the built-in scenes)
 
 
@@ -196,26 +198,6 @@ def build_walls(rooms: list[Room], connections: list[Connection], rng: np.random
 
 
 # --- rasterisation -----------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Grid:
-    origin: tuple[float, float]  # lower-left corner of cell (0, 0)
-    resolution: float
-    shape: tuple[int, int]  # (rows = y, cols = x)
-
-    def centres(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return (self.origin[0] + (cols + 0.5) * self.resolution,
-                self.origin[1] + (rows + 0.5) * self.resolution)
-
-    def window(self, xmin, ymin, xmax, ymax):
-        """Row and column index ranges of the cells whose centres may lie in the box."""
-        res = self.resolution
-        c0 = max(int(np.floor((xmin - self.origin[0]) / res)) - 1, 0)
-        c1 = min(int(np.ceil((xmax - self.origin[0]) / res)) + 1, self.shape[1])
-        r0 = max(int(np.floor((ymin - self.origin[1]) / res)) - 1, 0)
-        r1 = min(int(np.ceil((ymax - self.origin[1]) / res)) + 1, self.shape[0])
-        return r0, r1, c0, c1
 
 
 def grid_around(points: np.ndarray, margin: float = 1.0, res: float = RESOLUTION) -> Grid:
