@@ -191,10 +191,11 @@ def test_primitive_extraction_kernels_on_degenerate_clouds(points):
 
 
 def test_draw_and_solver_kernels_on_no_samples():
-    """cumulate, draw_row, _draw_rows, _admissible_triplets, _solve, _solve_2l,
-    _drawn_2l, _drawn_3l (via drawn_3l), _wrap_headings: no queries, no candidates, lines
-    without neighbours."""
-    from zfloc_stream.estimation import draws, solvers
+    """cumulate, draw_row, _draw_rows, draw_block, _admissible_triplets, the 3L and 2L
+    kernels on given and on drawn samples, _wrap_headings: no queries, no candidates,
+    lines without neighbours."""
+    from zfloc_stream.estimation import draws
+    from zfloc_stream.estimation.solvers import models, three_lines, two_lines
 
     z = np.zeros(0, np.int64)
     for starts, sizes in ((np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64)),
@@ -207,20 +208,23 @@ def test_draw_and_solver_kernels_on_no_samples():
     rows, weight = draws.admissible_triplets([[], [0], [0, 1]], np.array([0.0, 1.0, 2.0]), 0.1, np.ones(3))
     assert ((rows >= 0) & (rows < 3)).all() and len(rows) == len(weight) == 2
     f = np.zeros(0)
-    limits3 = (0.9, 0.5, 2.0, 0.1, 1e-9, 0.5, 2.0)
-    models, src = solvers._solve(f, f, f, f, f, f, z, z, z, z, z, z, f, f, f, 0, limits3)
-    assert models.shape == (0, 4) and len(src) == 0
-    trig = (f, f, f, f)
-    models, src = solvers._solve_2l(f, f, f, f, f, f, z, z, z, z, f, f, trig, 0, True, (0.9, 0.1, 0.5, 2.0))
-    assert models.shape == (0, 4) and len(src) == 0
-    models, src = solvers._drawn_2l(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f, z, z,
-                                    np.zeros((0, 2), np.int64), f, f, f, f, f, f, f, f, trig, 0, True, (0.9, 0.1, 0.5, 2.0))
-    assert models.shape == (0, 4)
-    models, src = solvers._drawn_3l(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f, 0, 0, 0, 0, z, z, z,
-                                    np.zeros((0, 3), np.int64), f, f, f, f, f, f, f, f, f, 0, limits3)
-    assert models.shape == (0, 4)
+    lines = models.LineColumns(f, f, f)
+    ids3, ids2 = np.zeros((0, 3), np.int64), np.zeros((0, 2), np.int64)
+    limits3 = three_lines.Limits3L(0.9, 0.5, 2.0, 0.1, 1e-9, 0.5, 2.0)
+    anchor = three_lines.AnchorRotations(f, f, f, 0)
+    found, src = three_lines._solve_samples(ids3, ids3, lines, lines, anchor, limits3)
+    assert found.shape == (0, 4) and len(src) == 0
+    rotations = two_lines.CandidateRotations(f, f, f, f, f, 0)
+    limits2 = two_lines.Limits2L(0.9, 0.1, 0.5, 2.0, True)
+    found, src = two_lines._solve_samples(ids2, ids2, f, lines, lines, rotations, limits2)
+    assert found.shape == (0, 4) and len(src) == 0
+    none = draws.Draws(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f)
+    found, src = two_lines._solve_drawn(none, (0, 0, 0, 0), ids2, ids2, f, lines, lines, rotations, limits2)
+    assert found.shape == (0, 4)
+    found, src = three_lines._solve_drawn(none, (0, 0, 0, 0), ids3, ids3, lines, lines, anchor, limits3)
+    assert found.shape == (0, 4)
     empty_models = np.zeros((0, 4))
-    solvers._wrap_headings(empty_models)
+    models._wrap_headings(empty_models)
 
 
 def test_scoring_kernels_on_no_points_no_models():

@@ -1,5 +1,5 @@
 """The hybrid RANSAC's compiled draws (estimation/draws.py) and the fused draw-and-solve
-of 3L / 2L samples (solvers.py): what a draw returns, what it takes from the random
+of 3L / 2L samples (estimation/solvers/): what a draw returns, what it takes from the random
 stream, the triplet table's definition, and the models' invariants."""
 
 import math
