@@ -146,21 +146,22 @@ def test_scan_match_rotation_kernel_on_degenerate_fields():
 
 
 def test_circle_kernels_on_degenerate_clusters():
-    """_groups, _members, _work_sizes, _fit_circle (through _circle_in_cluster),
-    angular_coverage_and_span, _best_two_line_sse, _clusters: nothing, one point, no
+    """link_groups, cluster_members, work_sizes, _fit_circle (through _circle_in_cluster),
+    angular_coverage_and_span, best_two_line_sse, _clusters: nothing, one point, no
     draws, one cluster of coincident points."""
+    from zfloc_stream.primitives import arc_checks, point_groups
     from zfloc_stream.primitives import circle_fitting as cf
 
-    keep, group = cf._groups(EMPTY2, np.zeros((0, 2), np.int64), 1.0, 1)
+    keep, group = point_groups.link_groups(EMPTY2, np.zeros((0, 2), np.int64), 1.0, 1)
     assert len(keep) == len(group) == 0
-    keep, group = cf._groups(np.zeros((1, 2)), np.zeros((0, 2), np.int64), 1.0, 1)
+    keep, group = point_groups.link_groups(np.zeros((1, 2)), np.zeros((0, 2), np.int64), 1.0, 1)
     assert keep.tolist() == [0] and group.tolist() == [0]
     none = np.zeros(0, np.int64)
-    assert [len(a) for a in cf._members(none, none, 0, 0)] == [0, 0]
-    assert len(cf._work_sizes(EMPTY2, none, none, 0, 0, 1.0)) == 0
-    assert cf.angular_coverage_and_span(np.zeros(0), 0.5) == (0.0, 0.0)
-    assert cf.angular_coverage_and_span(np.zeros(1), 0.5) == (0.0, 0.0)
-    assert cf._best_two_line_sse(EMPTY2, 3) == np.inf and cf._best_two_line_sse(np.zeros((6, 2)), 3) == 0.0
+    assert [len(a) for a in point_groups.cluster_members(none, none, 0, 0)] == [0, 0]
+    assert len(point_groups.work_sizes(EMPTY2, none, none, 0, 0, 1.0)) == 0
+    assert arc_checks.angular_coverage_and_span(np.zeros(0), 0.5) == (0.0, 0.0)
+    assert arc_checks.angular_coverage_and_span(np.zeros(1), 0.5) == (0.0, 0.0)
+    assert arc_checks.best_two_line_sse(EMPTY2, 3) == np.inf and arc_checks.best_two_line_sse(np.zeros((6, 2)), 3) == 0.0
     same = np.zeros((5, 2))
     ok = cf._circle_in_cluster(same, same, np.zeros((0, 3), np.int64), 0.02, 0.05, 0.5, 2, 10, 3, 0.5, 0.5, 1.0, 1.0)
     assert ok == (False, 0.0, 0.0, 0.0)
