@@ -22,7 +22,7 @@ import numpy as np
 from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation import localize
 from zfloc_stream.runtime.rng import make_rng
-from zfloc_stream.sim.builtin_scenes import build_scene
+from zfloc_stream.sim.scenes import build_scene
 
 from benchmarks.harness import Benchmark
 from benchmarks.inputs.batch_trial import MAX_HEADING_ERROR, MAX_POSITION_ERROR, make_trial, pose_errors

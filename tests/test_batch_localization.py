@@ -12,7 +12,7 @@ import pytest
 from zfloc_stream.settings.loading import Settings
 from zfloc_stream.estimation import localize
 from zfloc_stream.runtime.rng import make_rng
-from zfloc_stream.sim.builtin_scenes import build_scene
+from zfloc_stream.sim.scenes import build_scene
 
 from benchmarks.inputs.batch_trial import FREE_SCALE, MAX_HEADING_ERROR, MAX_POSITION_ERROR, SCENES, make_trial, pose_errors
 

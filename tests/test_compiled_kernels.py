@@ -146,21 +146,22 @@ def test_scan_match_rotation_kernel_on_degenerate_fields():
 
 
 def test_circle_kernels_on_degenerate_clusters():
-    """_groups, _members, _work_sizes, _fit_circle (through _circle_in_cluster),
-    angular_coverage_and_span, _best_two_line_sse, _clusters: nothing, one point, no
+    """link_groups, cluster_members, work_sizes, _fit_circle (through _circle_in_cluster),
+    angular_coverage_and_span, best_two_line_sse, _clusters: nothing, one point, no
     draws, one cluster of coincident points."""
+    from zfloc_stream.primitives import arc_checks, point_groups
     from zfloc_stream.primitives import circle_fitting as cf
 
-    keep, group = cf._groups(EMPTY2, np.zeros((0, 2), np.int64), 1.0, 1)
+    keep, group = point_groups.link_groups(EMPTY2, np.zeros((0, 2), np.int64), 1.0, 1)
     assert len(keep) == len(group) == 0
-    keep, group = cf._groups(np.zeros((1, 2)), np.zeros((0, 2), np.int64), 1.0, 1)
+    keep, group = point_groups.link_groups(np.zeros((1, 2)), np.zeros((0, 2), np.int64), 1.0, 1)
     assert keep.tolist() == [0] and group.tolist() == [0]
     none = np.zeros(0, np.int64)
-    assert [len(a) for a in cf._members(none, none, 0, 0)] == [0, 0]
-    assert len(cf._work_sizes(EMPTY2, none, none, 0, 0, 1.0)) == 0
-    assert cf.angular_coverage_and_span(np.zeros(0), 0.5) == (0.0, 0.0)
-    assert cf.angular_coverage_and_span(np.zeros(1), 0.5) == (0.0, 0.0)
-    assert cf._best_two_line_sse(EMPTY2, 3) == np.inf and cf._best_two_line_sse(np.zeros((6, 2)), 3) == 0.0
+    assert [len(a) for a in point_groups.cluster_members(none, none, 0, 0)] == [0, 0]
+    assert len(point_groups.work_sizes(EMPTY2, none, none, 0, 0, 1.0)) == 0
+    assert arc_checks.angular_coverage_and_span(np.zeros(0), 0.5) == (0.0, 0.0)
+    assert arc_checks.angular_coverage_and_span(np.zeros(1), 0.5) == (0.0, 0.0)
+    assert arc_checks.best_two_line_sse(EMPTY2, 3) == np.inf and arc_checks.best_two_line_sse(np.zeros((6, 2)), 3) == 0.0
     same = np.zeros((5, 2))
     ok = cf._circle_in_cluster(same, same, np.zeros((0, 3), np.int64), 0.02, 0.05, 0.5, 2, 10, 3, 0.5, 0.5, 1.0, 1.0)
     assert ok == (False, 0.0, 0.0, 0.0)
@@ -191,10 +192,11 @@ def test_primitive_extraction_kernels_on_degenerate_clouds(points):
 
 
 def test_draw_and_solver_kernels_on_no_samples():
-    """cumulate, draw_row, _draw_rows, _admissible_triplets, _solve, _solve_2l,
-    _drawn_2l, _drawn_3l (via drawn_3l), _wrap_headings: no queries, no candidates, lines
-    without neighbours."""
-    from zfloc_stream.estimation import draws, solvers
+    """cumulate, draw_row, _draw_rows, draw_block, _admissible_triplets, the 3L and 2L
+    kernels on given and on drawn samples, _wrap_headings: no queries, no candidates,
+    lines without neighbours."""
+    from zfloc_stream.estimation import draws
+    from zfloc_stream.estimation.solvers import models, three_lines, two_lines
 
     z = np.zeros(0, np.int64)
     for starts, sizes in ((np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64)),
@@ -207,20 +209,23 @@ def test_draw_and_solver_kernels_on_no_samples():
     rows, weight = draws.admissible_triplets([[], [0], [0, 1]], np.array([0.0, 1.0, 2.0]), 0.1, np.ones(3))
     assert ((rows >= 0) & (rows < 3)).all() and len(rows) == len(weight) == 2
     f = np.zeros(0)
-    limits3 = (0.9, 0.5, 2.0, 0.1, 1e-9, 0.5, 2.0)
-    models, src = solvers._solve(f, f, f, f, f, f, z, z, z, z, z, z, f, f, f, 0, limits3)
-    assert models.shape == (0, 4) and len(src) == 0
-    trig = (f, f, f, f)
-    models, src = solvers._solve_2l(f, f, f, f, f, f, z, z, z, z, f, f, trig, 0, True, (0.9, 0.1, 0.5, 2.0))
-    assert models.shape == (0, 4) and len(src) == 0
-    models, src = solvers._drawn_2l(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f, z, z,
-                                    np.zeros((0, 2), np.int64), f, f, f, f, f, f, f, f, trig, 0, True, (0.9, 0.1, 0.5, 2.0))
-    assert models.shape == (0, 4)
-    models, src = solvers._drawn_3l(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f, 0, 0, 0, 0, z, z, z,
-                                    np.zeros((0, 3), np.int64), f, f, f, f, f, f, f, f, f, 0, limits3)
-    assert models.shape == (0, 4)
+    lines = models.LineColumns(f, f, f)
+    ids3, ids2 = np.zeros((0, 3), np.int64), np.zeros((0, 2), np.int64)
+    limits3 = three_lines.Limits3L(0.9, 0.5, 2.0, 0.1, 1e-9, 0.5, 2.0)
+    anchor = three_lines.AnchorRotations(f, f, f, 0)
+    found, src = three_lines._solve_samples(ids3, ids3, lines, lines, anchor, limits3)
+    assert found.shape == (0, 4) and len(src) == 0
+    rotations = two_lines.CandidateRotations(f, f, f, f, f, 0)
+    limits2 = two_lines.Limits2L(0.9, 0.1, 0.5, 2.0, True)
+    found, src = two_lines._solve_samples(ids2, ids2, f, lines, lines, rotations, limits2)
+    assert found.shape == (0, 4) and len(src) == 0
+    none = draws.Draws(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), z, f)
+    found, src = two_lines._solve_drawn(none, (0, 0, 0, 0), ids2, ids2, f, lines, lines, rotations, limits2)
+    assert found.shape == (0, 4)
+    found, src = three_lines._solve_drawn(none, (0, 0, 0, 0), ids3, ids3, lines, lines, anchor, limits3)
+    assert found.shape == (0, 4)
     empty_models = np.zeros((0, 4))
-    solvers._wrap_headings(empty_models)
+    models._wrap_headings(empty_models)
 
 
 def test_scoring_kernels_on_no_points_no_models():

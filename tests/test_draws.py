@@ -1,5 +1,5 @@
 """The hybrid RANSAC's compiled draws (estimation/draws.py) and the fused draw-and-solve
-of 3L / 2L samples (solvers.py): what a draw returns, what it takes from the random
+of 3L / 2L samples (estimation/solvers/): what a draw returns, what it takes from the random
 stream, the triplet table's definition, and the models' invariants."""
 
 import math
@@ -114,3 +114,42 @@ def test_the_triplet_table_is_every_ordered_non_parallel_triplet_of_neighbours(s
                 if j != k and not (parallel(i, j) and parallel(i, k))]
     assert rows.dtype == np.int64 and [tuple(r) for r in rows] == expected
     assert np.array_equal(weights, lines.lengths[rows].min(axis=1) if len(rows) else np.zeros(0))
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("mode", ["free", "prior", "fixed"])
+def test_drawn_line_models_are_the_solvers_on_the_drawn_samples(seed, mode):
+    """Solving is apart from sampling: drawn_3l / drawn_2l give, bit for bit, what
+    draws.draw followed by solve_3l / solve_2l on the drawn samples gives (2L at a prior:
+    the same scale noise, drawn after the uniforms)."""
+    from zfloc_stream.estimation.solvers import drawn_2l, drawn_3l, sample_scale_noise, solve_3l
+    from zfloc_stream.estimation.solvers.two_lines import two_lines_at_scales
+
+    bev, fp = draw_scene(seed)
+    cfg = estimator_for(mode, 0.5)
+    angles = correspondences.line_angles(bev.lines)
+    three = mode == "free"
+    picks = bev.triplets if three else bev.pairs
+    table = fp.triplets if three else fp.pairs
+    starts, sizes = table.ranges(np.mod(bev.alpha[picks[:, 1:]] - bev.alpha[picks[:, :1]], np.pi))
+    a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+    if three:
+        got, source = drawn_3l(starts, sizes, 0.5, a, picks, table.rows, bev.lines, fp.lines, angles, fp.line_angles, cfg.solvers)
+    else:
+        got, source = drawn_2l(starts, sizes, 0.5, a, picks, table.rows, bev.lines, fp.lines, angles, fp.line_angles, 1.05,
+                               cfg.solvers, "fixed" if mode == "fixed" else "prior")
+    q, row = draw(starts, sizes, 0.5, b)
+    i, j = picks[q], table.rows[row]
+    n, d, m, e = bev.lines.normals[i], bev.lines.offsets[i], fp.lines.normals[j], fp.lines.offsets[j]
+    if three:
+        want, want_source = solve_3l(n, d, m, e, cfg.solvers, "free")
+    elif mode == "fixed":
+        want, want_source = two_lines_at_scales(n, d, m, e, np.ones(len(q)), cfg.solvers, check_scale=False)
+    else:
+        with np.errstate(all="ignore"):
+            s = 1.05 + sample_scale_noise(len(q), 1.05, cfg.solvers, b)
+            want, want_source = two_lines_at_scales(n, d, m, e, s, cfg.solvers, check_scale=True)
+    assert len(got) > 20
+    assert_same_bits(got, want)
+    assert np.array_equal(source, want_source)
+    assert a.random() == b.random()

@@ -4,7 +4,7 @@ import pytest
 from zfloc_stream.settings.loading import CircleSettings, LineSettings
 from zfloc_stream.errors import InputError
 from zfloc_stream.geometry.shapes import LineSet
-from zfloc_stream.primitives.circle_fitting import angular_coverage_and_span
+from zfloc_stream.primitives.arc_checks import angular_coverage_and_span
 from zfloc_stream.primitives.extract import deduplicate_lines, extract_circles, extract_lines, grid_subsample
 from zfloc_stream.runtime.rng import make_rng
 

@@ -97,7 +97,9 @@ def test_the_replay_samples_log_retired_keys_at_their_constants(path):
 
 
 def test_a_log_that_set_a_retired_key_otherwise_says_the_replay_may_differ(tmp_path, monkeypatch):
-    from session_helpers import laser_frames, write_fake_session
+    from session_helpers import write_fake_session
+
+    from benchmarks.inputs.session_frames import laser_frames
     from zfloc_stream.io.session import writer
 
     def dump_with_an_old_key(settings):

@@ -149,7 +149,7 @@ def test_line_only_dxf_fast_reader_equals_ezdxf(tmp_path, monkeypatch):
     from benchmarks.inputs.hostile_plans import write_dxf
     from benchmarks.inputs.plan_bombs import dxf_pieces
 
-    from zfloc_stream.plans import readers as plan_readers
+    from zfloc_stream.plans.readers import dxf as plan_readers
 
     rng = np.random.default_rng(5)
     lines = [((float(a), float(b)), (float(c), float(d))) for a, b, c, d in rng.uniform(0, 2000, (300, 4))] + [((1, 1), (1, 1))]

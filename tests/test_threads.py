@@ -11,7 +11,7 @@ from localizer_helpers import estimate_bits, run_localizer, settings_with
 from zfloc_stream.runtime import threads
 from zfloc_stream.errors import ConfigError
 from zfloc_stream.estimation import field_fit
-from zfloc_stream.estimation import angle_search, model_generation, scoring, solvers
+from zfloc_stream.estimation import angle_search, draws, model_generation, scoring
 from zfloc_stream.sim import LaserSimSettings, SimSettings, build_scene, simulate, simulate_laser
 
 
@@ -78,7 +78,7 @@ def split_everything(monkeypatch):
     monkeypatch.setattr(scoring, "_MIN_LOOKUPS_PER_THREAD", 1)
     monkeypatch.setattr(scoring, "_MIN_VIOLATION_MODELS_PER_THREAD", 1)
     monkeypatch.setattr(field_fit, "_MIN_MODELS_PER_THREAD", 1)
-    monkeypatch.setattr(solvers, "_MIN_DRAWS_PER_THREAD", 1)
+    monkeypatch.setattr(draws, "MIN_DRAWS_PER_THREAD", 1)
     split = []
     run = threads.run
 
@@ -87,7 +87,7 @@ def split_everything(monkeypatch):
             split.append(fn.__name__)
         return run(fn, pieces)
 
-    for module in (scoring, field_fit, solvers, angle_search):
+    for module in (scoring, field_fit, draws, angle_search):
         monkeypatch.setattr(module.threads, "run", spy)
     return split
 

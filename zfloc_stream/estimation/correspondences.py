@@ -17,7 +17,7 @@ from ..observation import BevObservation
 from ..primitives.extract import deduplicate_lines
 from .draws import admissible_triplets
 from .plan_cache import cached_per_floorplan
-from .solvers import MIN_BASELINE, NORMAL_CONSISTENCY, PARALLEL_ANGLE_DEG, normal_angle
+from .solvers.models import MIN_BASELINE, NORMAL_CONSISTENCY, PARALLEL_ANGLE_DEG, normal_angle
 
 
 def normal_angles(lines: LineSet) -> np.ndarray:

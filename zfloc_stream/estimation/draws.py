@@ -3,14 +3,34 @@ the admissible BEV / floorplan line triplets.
 
 For each query b with candidate ranges (starts[b], sizes[b]): ceil(fraction * n_b) uniform
 draws (with replacement) from its n_b candidates. Integer index arithmetic only (exact).
-The draw of one table row (draw_row) is shared with the fused draw-and-solve kernels of
-solvers.py, which call it from their own loops."""
+
+The line solvers (solvers/three_lines.py, solvers/two_lines.py) solve their samples as
+they are drawn, a block of draws at a time (draw_block), so the draws are never laid out
+whole; a round's draws are split over its threads in consecutive pieces (in_pieces).
+
+NB the solvers' compiled loops call draw_block (and through it draw_row and cumulate), and
+numba's disk cache does not notice a change in another file: after editing one of them,
+delete the solvers' cached kernels (solvers/__pycache__/*.nbi / .nbc)."""
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
+from ..runtime import threads
 from ..runtime.numba_support import njit
+
+# What a round's draws are made from (draw_uniforms): per query b its candidate ranges
+# (starts[b], sizes[b]) in a table, the number of draws counts[b], and one uniform in
+# [0, 1) per draw, the draws of query 0 first.
+Draws = namedtuple("Draws", "starts sizes counts uniform")
+
+# draws per block of draw_block: a solver's block buffers stay in the L1 cache
+DRAW_BLOCK = 512
+# in_pieces splits the draws over the round's threads only in pieces of at least this
+# many (~1 ms of line solving)
+MIN_DRAWS_PER_THREAD = 32_768
 
 
 @njit
@@ -30,11 +50,7 @@ def draw_row(starts, sizes, cum, b, n, uniform):
     uniform in [0, 1) scaled to n (u = min(floor(uniform * n), n - 1))
     and mapped to starts[b, r] + u - (cum[b, r] - sizes[b, r]), r the range holding u: the
     number of cumulative counts <= u, as numpy's searchsorted(side="right") finds it
-    (counted without branches: which range a random draw lands in is unpredictable).
-
-    NB solvers.py's fused kernels call this function and numba's disk cache does not
-    notice a change in another file: after editing it, delete solvers' cached kernels
-    (__pycache__/solvers.*.nbi / .nbc)."""
+    (counted without branches: which range a random draw lands in is unpredictable)."""
     u = np.int64(uniform * n)  # truncation, as numpy's astype(int64) of a non-negative value
     if u > n - 1:
         u = n - 1
@@ -62,7 +78,7 @@ def _draw_rows(starts, sizes, counts, uniform):
     return query, row
 
 
-def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator):
+def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> Draws:
     """What a draw takes from rng: the number of draws per query
     (ceil(fraction * n_b), at least one where n_b > 0) and one uniform per draw (none, and
     nothing taken from rng, when there are no draws). Also starts and sizes as contiguous
@@ -71,7 +87,66 @@ def draw_uniforms(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: n
     k = np.where(n > 0, np.maximum(np.ceil(fraction * n), 1), 0).astype(np.int64)
     total = int(k.sum())
     uniform = rng.random(total) if total else np.zeros(0)
-    return np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(sizes, dtype=np.int64), k, uniform
+    return Draws(np.ascontiguousarray(starts, dtype=np.int64), np.ascontiguousarray(sizes, dtype=np.int64), k, uniform)
+
+
+@njit
+def piece_cursor(draws, piece, cum):
+    """Where the draws of piece (j_start, j_end, b_start, left_start) begin: its first
+    draw is one of query b_start's, which has left_start draws left there. Returns the
+    cursor (query, its candidate count, its draws left) that draw_block continues from,
+    cum holding the query's running counts (cumulate)."""
+    b, left = piece[2], piece[3]
+    n = 0
+    if left > 0:
+        n = cumulate(draws.sizes, b, cum)
+    return b, n, left
+
+
+@njit
+def draw_block(draws, rows, j, m, cursor, cum, query, lines):
+    """Draws j to j + m - 1 (draw_row), continuing from cursor (piece_cursor, or the
+    previous block's): query[k] the query of draw j + k, lines[k] the table row it drew
+    (rows (T, width)). The rows are looked up here, a block at a time: random memory
+    accesses independent of one another, so they overlap. Returns the cursor after the
+    block."""
+    b, n, left = cursor
+    for k in range(m):
+        while left == 0:  # total = sum(counts): a query with draws follows
+            b += 1
+            n = cumulate(draws.sizes, b, cum)
+            left = draws.counts[b]
+        row = draw_row(draws.starts, draws.sizes, cum, b, n, draws.uniform[j + k])
+        query[k] = b
+        for c in range(rows.shape[1]):
+            lines[k, c] = rows[row, c]
+        left -= 1
+    return b, n, left
+
+
+def whole(draws: Draws) -> tuple:
+    """The piece of all the draws (piece_cursor's (j_start, j_end, b_start, left_start))."""
+    return piece_of(np.cumsum(draws.counts), 0, len(draws.uniform))
+
+
+def piece_of(ends: np.ndarray, j_start: int, j_end: int) -> tuple:
+    """Draws j_start to j_end - 1 as a piece: it starts inside the query whose draws
+    cover its first draw (ends: the cumulative counts)."""
+    b = int(np.searchsorted(ends, j_start, side="right"))
+    return j_start, j_end, b, int(ends[b] - j_start)
+
+
+def in_pieces(solve_piece, draws: Draws):
+    """solve_piece(piece) -> (models, source) over the draws in consecutive pieces, one
+    per thread of the round (at least MIN_DRAWS_PER_THREAD each), joined in draw order:
+    the same rows with any thread count."""
+    ends = np.cumsum(draws.counts)
+
+    def piece(r):
+        return solve_piece(piece_of(ends, r[0], r[1]))
+
+    parts = threads.run(piece, threads.ranges(len(draws.uniform), MIN_DRAWS_PER_THREAD))
+    return np.concatenate([m for m, _ in parts]), np.concatenate([src for _, src in parts])
 
 
 def draw(starts: np.ndarray, sizes: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -3,7 +3,7 @@
 from .from_floorplan import build_scene_from_floorplan
 from .layout import Connection, Room, snap
 from .render import camera_pose, intrinsics, render
-from .builtin_scenes import SCENES, build_scene
+from .scenes import SCENES, build_scene
 from .scenes import Scene, make_scene
 from .simulator import (LaserSequence, LaserSimSettings, SimSequence, SimSettings, drift_odometry, simulate,
                         simulate_laser)

@@ -29,7 +29,7 @@ from ..frames import OTHER, UNKNOWN, WALL, CameraFrame, LaserFrame
 from ..runtime.rng import make_rng
 from ..geometry.sim2 import Sim2, wrap_angle
 from .render import box_distance, camera_pose, intrinsics, render
-from .builtin_scenes import build_scene
+from .scenes import build_scene
 from .scenes import Scene
 from .trajectory import WalkSettings, random_walk
 

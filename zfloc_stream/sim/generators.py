@@ -1,22 +1,19 @@
-"""The built-in scene generators and their registry: `SCENES` maps a name to its
-generator, `build_scene(name, seed=0)` builds one (the same (name, seed), the same scene).
-What they share (the Scene, furnishing, assembly) is scenes.py.
-"""
+"""The built-in scene generators, each a function of the seed alone: rooms (a guillotine-cut
+flat), apartment, office (an open plan with pillars), hall, symmetric (a plan with
+symmetries: the localizer's ambiguous case) and offices (a corridor of identical offices).
+Each lays out its rooms and doors and hands them to assembly.assemble."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
 from ..runtime.rng import make_rng
+from .assembly import DOOR_WIDTH, EXTERIOR_WALL, INTERIOR_WALL, assemble, furnish, partition, random_tree_doors
 from .layout import RESOLUTION, Connection, Room, build_walls, snap
-from .scenes import DOOR_WIDTH, EXTERIOR_WALL, INTERIOR_WALL, Scene, assemble, furnish, partition, random_tree_doors
+from .scene import Scene
 
 
-# --- generators -------------------------------------------------------------------------------
-
-
-def _gen_rooms(seed: int) -> Scene:
+def generate_rooms(seed: int) -> Scene:
     """2-4 rooms, ~40 m2: a rectangle cut guillotine-style, doors on a random tree."""
     rng = make_rng(seed, "scene", "rooms")
     area = rng.uniform(36.0, 43.0)
@@ -78,7 +75,7 @@ def _alcove(rooms: list[Room], rng) -> Room:
     return Room("alcove", "room", host.x1, a, snap(host.x1 + depth), b)
 
 
-def _gen_apartment(seed: int) -> Scene:
+def generate_apartment(seed: int) -> Scene:
     """~100 m2: a hallway with rooms on both sides and a living room across one end."""
     rng = make_rng(seed, "scene", "apartment")
     width, depth = rng.uniform(11.5, 13.0), rng.uniform(8.6, 9.6)
@@ -118,7 +115,7 @@ def _open_plan_pillars(room: Room, rng, margin: float = 2.5) -> list[tuple[float
     return [(snap(x), snap(y), radius) for x in xs for y in ys]
 
 
-def _gen_office(seed: int) -> Scene:
+def generate_office(seed: int) -> Scene:
     """~2500 m2: two long corridors joined by cross corridors, offices along the facades,
     an open-plan area with round pillars, meeting rooms and service cores in the middle."""
     rng = make_rng(seed, "scene", "office")
@@ -190,7 +187,7 @@ def _gen_office(seed: int) -> Scene:
                      wall_height=rng.uniform(2.7, 3.0), target_area=2500.0)
 
 
-def _gen_hall(seed: int) -> Scene:
+def generate_hall(seed: int) -> Scene:
     """~500 m2: a pillared hall, a row of side rooms along part of one long side and an
     entrance lobby off one short side (these break the hall's symmetry)."""
     rng = make_rng(seed, "scene", "hall")
@@ -212,7 +209,7 @@ def _gen_hall(seed: int) -> Scene:
                      wall_height=rng.uniform(2.8, 3.0), target_area=500.0)
 
 
-def _gen_symmetric(seed: int) -> Scene:
+def generate_symmetric(seed: int) -> Scene:
     """A long corridor with rooms on both sides, point-symmetric about its centre (a place
     and its 180-degree image look identical), plus an annex off the east end that is the
     only distinguishing part.
@@ -272,7 +269,7 @@ def _gen_symmetric(seed: int) -> Scene:
                      doors=doors, walls=(segments, thickness))
 
 
-def _gen_offices(seed: int) -> Scene:
+def generate_offices(seed: int) -> Scene:
     """A repetitive building: one long corridor with identical offices on both sides (the
     same width, depth, door offset and furniture in every office of a side), a stair core
     at the west end and a kitchen at the east end. A place in the corridor and the place
@@ -337,22 +334,3 @@ def _gen_offices(seed: int) -> Scene:
     return assemble("offices", seed, rooms, connections, rng, furniture=furniture,
                      wall_height=2.7, target_area=float(n * period * (depth_s + depth_n + 2 * hw)),
                      waypoints=waypoints, info=info, doors=doors, walls=(segments, thickness))
-
-
-SCENES = {
-    "rooms": _gen_rooms,
-    "apartment": _gen_apartment,
-    "office": _gen_office,
-    "symmetric": _gen_symmetric,
-    "hall": _gen_hall,
-    "offices": _gen_offices,
-}
-
-
-def build_scene(name: str, seed: int = 0) -> Scene:
-    """Build a registered scene; same (name, seed) -> identical scene."""
-    try:
-        generator = SCENES[name]
-    except (KeyError, TypeError):
-        raise InputError(f"unknown scene '{name}'; known scenes: {', '.join(sorted(SCENES))}") from None
-    return generator(int(seed))
