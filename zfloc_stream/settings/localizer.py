@@ -41,7 +41,7 @@ class LocalizerSettings(Section):
     # camera; walking into a part the map lacks, under 0.01 (the built-in office with walls
     # erased), where a place 12.7 m away explains those frames better
     kidnap_contradiction: float = Field(0.15, ge=0, le=1)
-    # the audit (issue 43): carried to a place that looks like the old one (identical offices
+    # the audit: carried to a place that looks like the old one (identical offices
     # along a corridor), the frames do not contradict the BEV and the old place still explains
     # 0.90-0.95 of each frame's hits, so neither the monitor nor the contradiction starts a
     # kidnap test. While a mode is tracked, each round tick also runs a global search on what

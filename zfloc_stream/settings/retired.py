@@ -1,5 +1,5 @@
 """Retired settings: algorithm-internal tuning that was once a setting and is now a named
-constant next to the code that uses it (issue 42, "settings a person can hold").
+constant next to the code that uses it (a person can hold the settings that remain).
 
 Users' config files and session logs (every log carries its whole settings block, the
 replay samples included) still name these keys. Reading them drops each retired key; one

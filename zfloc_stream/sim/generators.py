@@ -274,7 +274,7 @@ def generate_offices(seed: int) -> Scene:
     same width, depth, door offset and furniture in every office of a side), a stair core
     at the west end and a kitchen at the east end. A place in the corridor and the place
     whole offices along it look the same until an end comes into view (a kidnap to a place
-    that looks like the old one: issue 43).
+    that looks like the old one).
 
     The office width `info['period']` is a whole number of raster cells, so the raster (the
     floorplan) and the 3D scene repeat exactly. Waypoints: 'west_end', 'east_end' (corridor

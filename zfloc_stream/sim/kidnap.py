@@ -1,4 +1,4 @@
-"""Kidnaps inside the repetitive building (scene 'offices', issue 43): a walk along its
+"""Kidnaps inside the repetitive building (scene 'offices'): a walk along its
 corridor and back, and where to carry the sensor off so that it lands whole offices
 further along, at a place that looks like the one it left.
 

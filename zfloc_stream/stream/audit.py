@@ -66,9 +66,9 @@ class Audit:
         """An audit's test adopts `found` only while its round still finds the old place
         outscored (Places.outscored) and scores found at least monitor_relative_share of the
         old mode's usual audit score (the median over its audits that did not outscore it;
-        a relative level, as the monitor's). In the held-out laser window aces 291 #100 the
-        recent frames saw what the map lacks: the old place fell from 0.78-0.84 to -0.06
-        and a place 4-8 m off, at 0.15, was adopted."""
+        a relative level, as the monitor's). Without it, recent frames that see what the map
+        lacks score the old place far below its usual level and a weak place a few metres
+        off, barely better, would be adopted."""
         if not places.outscored(outcome, old, sensor_xy, found) or old.id != self._mode or not self._usual:
             return False
         there = places.best_at(outcome, found, old, sensor_xy)

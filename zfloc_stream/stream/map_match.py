@@ -1,12 +1,13 @@
-"""Does the map explain what the sensor sees? (issue 43)
+"""Does the map explain what the sensor sees?
 
 A wrong map (another building, another floor, a plan that lacks the rooms) still has a
 best place: the tracker's rules compare places with each other, so they can single one
-out and report it `tracking` (aces camera session on the FHW map: frames 10-11 `tracking`,
-weight 0.95, 44-46 m off). What separates right from wrong maps is a level: the share of
-the latest BEV's wall points that lie within localizer.monitor_distance of a plan wall
-under the reported alignment. Shared camera sessions on their own maps: >= 0.61 on every
-frame; on other buildings' maps 0.0-0.84, and 0.46 where the tracker said `tracking`.
+out and report it `tracking`, with almost all of the weight, tens of metres off. What
+separates right from wrong maps is a level: the share of the latest BEV's wall points
+that lie within localizer.monitor_distance of a plan wall under the reported alignment
+(on the shared buildings' own maps it stays well above tracking.min_explained_share; on
+other buildings' maps it falls below it where the tracker would have said `tracking`:
+docs/measurements/status.md).
 
 Per frame the share goes to the status decision (the MAP_UNEXPLAINED rule of
 tracking/status.py); per run, a run of at least MIN_JUDGED_FRAMES judged frames in which

@@ -5,8 +5,8 @@ a wheel slip of metres, a relocalising SLAM front end) moves every later pose by
 and the frames after it are fused into the BEV at the wrong place, on top of the old
 ones. The monitor (monitor.py) sees the frames' hits stop fitting the floorplan, but only
 once the hits are judged, and a BEV smeared by the jump can then confirm a wrong mode
-(issue 44: 1 km jump `tracking` 1,011 m off at confidence 1.0; 3 m jump 11-15 frames
-`tracking` 2.4-3 m off).
+(without this watch a 1 km jump was reported `tracking` 1 km off at confidence 1.0, a
+3 m jump `tracking` 2.4-3 m off for over ten frames).
 
 Each fused frame's step in the plane frame (metres and turn since the last accepted frame)
 is compared with the recent motion and with what the BEV says of the frame's wall hits

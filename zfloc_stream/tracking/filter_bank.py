@@ -345,7 +345,7 @@ class HypothesisTracker:
             if not frame.map_explains:
                 confidence *= explained / self.settings.min_explained_share
         # never more than the status vouches for: above dominance_weight only while tracking
-        # (belgioioso camera session: a mode 16 m off, not singled out, carried 0.96 of the weight)
+        # (a mode the round did not single out can carry almost all of the weight and be wrong)
         return decision, confidence if vouches(decision) else min(confidence, self.settings.dominance_weight)
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:

@@ -106,8 +106,8 @@ def rounds_to_track(was_lost: bool, s: TrackingSettings) -> int:
     """Hits a mode needs before it is tracked (CONFIRMED): confirm_rounds, and after a loss
     at least confirm_rounds_after_loss (the evidence it took to drop a track is what it
     takes to trust the next one: right after a loss the map has just shown it can fool the
-    tracker; aces laser window 0 #100 re-acquired a mode 43 m off after two sightings and
-    reported it `tracking` for 10 frames)."""
+    tracker, and a place re-found twice can still be a look-alike tens of metres off;
+    docs/measurements/status.md has the windows)."""
     return max(s.confirm_rounds, s.confirm_rounds_after_loss) if was_lost else s.confirm_rounds
 
 
@@ -125,16 +125,17 @@ def has_close_rival(leader: ModeNumbers, modes: Sequence[ModeNumbers], s: Tracki
 def singled_out(leader: ModeNumbers, modes: Sequence[ModeNumbers]) -> bool:
     """No other mode was found near the top of the latest round: the round points at the
     leader alone. Asked only before a mode starts to be tracked (a tracked mode meeting a
-    rival near the top is the collapse rule's business). belgioioso camera session: a mode
-    16 m off was confirmed in round 2 with a fresh score of 0.132 against a new rival's
-    0.125, its running score carried by round 1 alone."""
+    rival near the top is the collapse rule's business). Without it a mode can be
+    confirmed by its first round's lead alone while the latest round scores a rival as
+    high."""
     return not any(m is not leader and m.near_top for m in modes)
 
 
 def dominates(leader: ModeNumbers, s: TrackingSettings) -> bool:
     """The leader's share of the bank's weight exceeds dominance_weight. Many newcomers
-    that each score close to it mean the data do not single it out yet (held-out laser
-    windows: a reported mode 15-60 m off had 0.3-0.45 of the weight, spread over 8 modes)."""
+    that each score close to it mean the data do not single it out yet: a wrong mode
+    reported on the real buildings held well under half of the weight, spread over many
+    modes (docs/measurements/status.md)."""
     return leader.weight > s.dominance_weight
 
 
@@ -196,9 +197,10 @@ def map_explains(share: float | None, s: TrackingSettings) -> bool:
     """MAP_UNEXPLAINED when False: under the reported alignment less than
     min_explained_share of the latest BEV's wall points lie near a plan wall. The one rule
     that compares with a level, not a gap: a gap says which place is best, not whether any
-    place in this map is right (aces camera session on the FHW map: `tracking`, weight
-    0.95, 44-46 m off, with 0.46 of its BEV explained; on its own map >= 0.61). None (no
-    BEV to judge yet) does not withhold `tracking`."""
+    place in this map is right (on another building's map the best place can hold almost
+    all of the weight while its map explains under half of what the sensor saw; the
+    numbers are in docs/measurements/status.md). None (no BEV to judge yet) does not
+    withhold `tracking`."""
     return share is None or share >= s.min_explained_share
 
 
