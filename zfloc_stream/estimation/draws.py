@@ -104,6 +104,17 @@ def piece_cursor(draws, piece, cum):
 
 
 @njit
+def block_buffers(draws, piece, width):
+    """What a solver's draw loop over piece needs before its first draw_block: the
+    query's running counts (cum), a block's query of each draw (query) and its `width`
+    table rows (lines), and the cursor (piece_cursor)."""
+    cum = np.empty(draws.sizes.shape[1], np.int64)
+    query = np.empty(DRAW_BLOCK, np.int64)
+    lines = np.empty((DRAW_BLOCK, width), np.int64)
+    return cum, query, lines, piece_cursor(draws, piece, cum)
+
+
+@njit
 def draw_block(draws, rows, j, m, cursor, cum, query, lines):
     """Draws j to j + m - 1 (draw_row), continuing from cursor (piece_cursor, or the
     previous block's): query[k] the query of draw j + k, lines[k] the table row it drew

@@ -19,7 +19,7 @@ import numpy as np
 
 from ...runtime.numba_support import njit
 from ...settings.loading import ScaleMode, SolverSettings
-from ..draws import DRAW_BLOCK, draw_block, draw_uniforms, in_pieces, piece_cursor
+from ..draws import DRAW_BLOCK, block_buffers, draw_block, draw_uniforms, in_pieces
 from .models import (anchor_table, append_model, as_batch, flat_line_columns, line_columns, no_models, quiet, rotation_table,
                      sample_lines, sign_of, wrapped)
 from .two_lines import two_lines_at_scales
@@ -192,14 +192,10 @@ def _solve_drawn(draws, piece, picks, rows, bev, fp, anchor, limits):
     j_start, j_end = piece[0], piece[1]
     out = np.empty((j_end - j_start, 4), np.float64)
     src = np.empty(j_end - j_start, np.int64)
-    cum = np.empty(draws.sizes.shape[1], np.int64)
-    query = np.empty(DRAW_BLOCK, np.int64)
-    lines = np.empty((DRAW_BLOCK, 3), np.int64)
+    cum, query, lines, cursor = block_buffers(draws, piece, 3)
     passed = np.empty(DRAW_BLOCK, np.int64)
     kept = 0
-    cursor = piece_cursor(draws, piece, cum)
-    j = j_start
-    while j < j_end:
+    for j in range(j_start, j_end, DRAW_BLOCK):
         m = min(DRAW_BLOCK, j_end - j)
         cursor = draw_block(draws, rows, j, m, cursor, cum, query, lines)
         count = 0
@@ -215,7 +211,6 @@ def _solve_drawn(draws, piece, picks, rows, bev, fp, anchor, limits):
                                               bev, fp, anchor, limits)
             if ok:
                 kept = append_model(out, src, kept, j + k, tx, ty, theta, s)
-        j += m
     return out[:kept].copy(), src[:kept].copy()
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...runtime.numba_support import njit
 from ...settings.loading import ScaleMode, SolverSettings
-from ..draws import DRAW_BLOCK, draw_block, draw_uniforms, piece_cursor, whole
+from ..draws import DRAW_BLOCK, block_buffers, draw_block, draw_uniforms, whole
 from .models import (anchor_table, append_model, as_batch, flat_line_columns, line_columns, no_models, quiet, rotation_table,
                      sample_lines, sign_of, wrapped)
 from .scale_prior import sample_scale_noise
@@ -141,20 +141,15 @@ def _solve_drawn(draws, piece, picks, rows, scales, bev, fp, rotations, limits):
     j_start, j_end = piece[0], piece[1]
     out = np.empty((2 * (j_end - j_start), 4), np.float64)
     src = np.empty(2 * (j_end - j_start), np.int64)
-    cum = np.empty(draws.sizes.shape[1], np.int64)
-    query = np.empty(DRAW_BLOCK, np.int64)
-    lines = np.empty((DRAW_BLOCK, 2), np.int64)
+    cum, query, lines, cursor = block_buffers(draws, piece, 2)
     kept = 0
-    cursor = piece_cursor(draws, piece, cum)
-    j = j_start
-    while j < j_end:
+    for j in range(j_start, j_end, DRAW_BLOCK):
         m = min(DRAW_BLOCK, j_end - j)
         cursor = draw_block(draws, rows, j, m, cursor, cum, query, lines)
         for k in range(m):
             q = query[k]
             res = _solve_one((picks[q, 0], picks[q, 1]), (lines[k, 0], lines[k, 1]), scales[j + k], bev, fp, rotations, limits)
             kept = _append_candidates(out, src, kept, j + k, scales[j + k], res)
-        j += m
     return out[:kept].copy(), src[:kept].copy()
 
 
