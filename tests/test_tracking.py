@@ -493,6 +493,6 @@ def test_confidence_above_dominance_weight_only_on_tracking_frames():
     tracker.update([seen(TRUE, rng, 0, 0.8)], sensor_at(0), frame=0)
     assert tracker.status == "tracking" and tracker.best.weight == pytest.approx(1.0)
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("tracking", pytest.approx(1.0))
-    tracker._round = replace(tracker._round, confirmation=policy.AMBIGUITY)  # the same mode, not vouched for by the status
+    tracker._round = replace(tracker._round, confirmation=policy.PolicyRule.AMBIGUITY)  # the same mode, not vouched for by the status
     cap = tracker.settings.dominance_weight
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", cap)

@@ -32,8 +32,8 @@ def mode(id=0, weight=0.5, running_score=0.5, hits=1, collapses=0, near_top=Fals
 # --- the policy's rules --------------------------------------------------------------------
 def test_birth_score_gap():
     s = S.model_copy(update={"birth_score_gap": 0.25})
-    assert policy.birth_rule(0, -5.0, 0.5, s) == policy.BEST_STARTS_A_MODE  # the best always
-    assert policy.birth_rule(1, 0.25, 0.5, s) == policy.BIRTH_GAP
+    assert policy.birth_rule(0, -5.0, 0.5, s) == policy.PolicyRule.BEST_STARTS_A_MODE  # the best always
+    assert policy.birth_rule(1, 0.25, 0.5, s) == policy.PolicyRule.BIRTH_GAP
     assert policy.birth_rule(1, below(0.25), 0.5, s) is None
 
 
@@ -44,10 +44,10 @@ def test_confirm_score_gap():
 
 def test_lost_score_gap():
     assert policy.collapse_rule(1, 0.25, 0.5, True, S.model_copy(update={"lost_score_gap": 0.25})) is None
-    assert policy.collapse_rule(1, 0.25, 0.5, True, S.model_copy(update={"lost_score_gap": below(0.25)})) == policy.BEATEN_BY_RIVAL
+    assert policy.collapse_rule(1, 0.25, 0.5, True, S.model_copy(update={"lost_score_gap": below(0.25)})) == policy.PolicyRule.BEATEN_BY_RIVAL
     # the round's best itself never collapses; an unmatched mode does when the round found anything
     assert policy.collapse_rule(0, -9.0, 0.5, True, S) is None
-    assert policy.collapse_rule(None, 0.0, 0.0, True, S) == policy.UNSEEN_COLLAPSES
+    assert policy.collapse_rule(None, 0.0, 0.0, True, S) == policy.PolicyRule.UNSEEN_COLLAPSES
     assert policy.collapse_rule(None, 0.0, 0.0, False, S) is None
 
 
@@ -63,9 +63,9 @@ def test_confirm_rounds_after_loss(n):
     s = S.model_copy(update={"confirm_rounds": 2, "confirm_rounds_after_loss": n})
     assert policy.rounds_to_track(True, s) == n and policy.rounds_to_track(False, s) == 2
     leader = mode(weight=0.95, hits=n)
-    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.TRACKING
+    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.PolicyRule.TRACKING
     leader.hits = n - 1
-    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.WAITING_FOR_CONFIRMATION
+    assert policy.round_status_rule(leader, [leader], None, True, s) == policy.PolicyRule.WAITING_FOR_CONFIRMATION
 
 
 def test_ambiguity_ratio():
@@ -81,35 +81,35 @@ def test_dominance_weight():
     assert not policy.dominates(leader, S.model_copy(update={"dominance_weight": 0.9}))
     assert policy.dominates(leader, S.model_copy(update={"dominance_weight": below(0.9)}))
     s = S.model_copy(update={"dominance_weight": 0.9})
-    assert policy.round_status_rule(leader, [leader], None, False, s) == policy.THIN_EVIDENCE
+    assert policy.round_status_rule(leader, [leader], None, False, s) == policy.PolicyRule.THIN_EVIDENCE
 
 
 def test_a_mode_not_yet_tracked_must_be_singled_out_by_the_round():
     leader, rival = mode(0, weight=0.95, hits=5), mode(1, weight=0.05, near_top=True)
-    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.THIN_EVIDENCE
-    assert policy.round_status_rule(leader, [leader, rival], 0, False, S) == policy.TRACKING  # already tracked
+    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.PolicyRule.THIN_EVIDENCE
+    assert policy.round_status_rule(leader, [leader, rival], 0, False, S) == policy.PolicyRule.TRACKING  # already tracked
     rival.near_top = False
-    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.TRACKING
+    assert policy.round_status_rule(leader, [leader, rival], None, False, S) == policy.PolicyRule.TRACKING
 
 
 @pytest.mark.parametrize("n", [1, 3, 4])
 def test_lost_rounds(n):
     s = S.model_copy(update={"lost_rounds": n})
     tracked = mode(collapses=n)
-    assert policy.loss_rule(tracked, tracked, s) == policy.COLLAPSED
+    assert policy.loss_rule(tracked, tracked, s) == policy.PolicyRule.COLLAPSED
     tracked.collapses = n - 1
     assert policy.loss_rule(tracked, tracked, s) is None
-    assert policy.loss_rule(tracked, mode(1), s) == policy.OVERTAKEN
-    assert policy.loss_rule(None, None, s) == policy.PRUNED
+    assert policy.loss_rule(tracked, mode(1), s) == policy.PolicyRule.OVERTAKEN
+    assert policy.loss_rule(None, None, s) == policy.PolicyRule.PRUNED
 
 
 @pytest.mark.parametrize("n", [1, 3, 5])
 def test_rival_established_rounds(n):
     s = S.model_copy(update={"rival_established_rounds": n, "confirm_rounds": 1})
     tracked, rival = mode(0, weight=0.3, hits=9), mode(1, weight=0.7, hits=n)
-    assert policy.reported_mode([tracked, rival], tracked, s) == (rival, policy.OVERTAKEN)
+    assert policy.reported_mode([tracked, rival], tracked, s) == (rival, policy.PolicyRule.OVERTAKEN)
     rival.hits = n - 1
-    assert policy.reported_mode([tracked, rival], tracked, s) == (tracked, policy.TRACKED_KEEPS_ITS_PLACE)
+    assert policy.reported_mode([tracked, rival], tracked, s) == (tracked, policy.PolicyRule.TRACKED_KEEPS_ITS_PLACE)
 
 
 def test_newcomer_score_gap():
@@ -117,7 +117,7 @@ def test_newcomer_score_gap():
     s = S.model_copy(update={"newcomer_score_gap": 0.25})
     assert policy.reported_mode([confirmed, newcomer], None, s) == (confirmed, None)
     s = S.model_copy(update={"newcomer_score_gap": below(0.25)})
-    assert policy.reported_mode([confirmed, newcomer], None, s) == (newcomer, policy.NEWCOMER)
+    assert policy.reported_mode([confirmed, newcomer], None, s) == (newcomer, policy.PolicyRule.NEWCOMER)
 
 
 def test_pose_jump_chi2():
@@ -329,7 +329,7 @@ def test_odometry_jump_watch_judges_a_full_window_asks_the_bev_and_lets_the_next
     assert watch.judge(walk(8), 0, 1.0, 100) is None  # back on the track: a spike
     assert watch.judge((3.8, 0.0, 0.0), lc.monitor_min_points - 1, 0.0, lc.monitor_min_points - 1)[0] == SUSPECT  # too few known hits to explain it
     verdict = watch.judge((3.9, 0.0, 0.0), 0, 1.0, 100)  # going on from the suspect frame
-    assert verdict[0] == JUMPED and verdict[1].startswith(policy.ODOMETRY_JUMP)
+    assert verdict[0] == JUMPED and verdict[1].startswith(policy.PolicyRule.ODOMETRY_JUMP)
     min_turn = settings.tracking.odometry_jump_min_turn_deg  # no turn in the window: the limit is min_turn
     for turn, expected in ((np.deg2rad(min_turn - 0.01), None), (np.deg2rad(min_turn + 0.01), SUSPECT)):  # the exact boundary: above
         watch.restart((0.0, 0.0, 0.0))

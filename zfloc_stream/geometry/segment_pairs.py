@@ -247,7 +247,7 @@ def segment_neighbours(endpoints: np.ndarray, reach: float) -> list[np.ndarray]:
 
 
 def deduplicate_lines(lines: LineSet, settings) -> LineSet:
-    """Drop lines that repeat a longer one (settings: config.LineSettings): nearly parallel
+    """Drop lines that repeat a longer one (settings: settings/estimation.py's LineSettings): nearly parallel
     (< dedup_angle_deg), nearly the same offset (the shorter one's midpoint within
     dedup_offset of the longer line) and overlapping extents. Order (longest first) is kept.
 

@@ -1,7 +1,7 @@
 """Vector floorplans: DXF (ezdxf), SVG (svgelements), GeoJSON (shapely), as architects and
 facilities offices hand them out.
 
-    plan = load_vector_floorplan("plan.dxf", settings, layers=["WALLS"])   # or plan_loading.load_floorplan
+    plan = load_vector_floorplan("plan.dxf", settings, layers=["WALLS"])   # or plans.loading.load_floorplan
 
 What is read:
 - DXF: LINE, LWPOLYLINE (bulges as arcs), POLYLINE, ARC, CIRCLE, also inside block
@@ -26,7 +26,7 @@ A vector floorplan written into a session (write_ros) carries its source file an
 that is both a ROS map_server file (image, resolution, origin: the raster) and names the
 vector source (`vector:`), so a replay rebuilds the same lines and circles.
 
-File reading is plan_readers.py's, the collinear merge segment_merging.py's; this module
+File reading is readers/'s, the collinear merge segment_merging.py's; this module
 turns the geometry into a Floorplan.
 """
 
@@ -216,7 +216,7 @@ class VectorFloorplan(Floorplan):
 
     def write_ros(self, directory, name: str = "map") -> Path:
         """The raster as a ROS map (name.yaml + name.png) whose YAML also names the drawing
-        (copied beside it), so plan_loading.load_floorplan of the YAML rebuilds this vector floorplan."""
+        (copied beside it), so loading.load_floorplan of the YAML rebuilds this vector floorplan."""
         out = super().write_ros(directory, name)
         if self.source is not None:
             suffix = Path(self.source[0]).suffix.lower()

@@ -1,6 +1,6 @@
 """What every settings section shares: the pydantic base (unknown keys and NaN refused,
 numbers taken as numbers only) and the cross-field rule helpers (`ordered`,
-`section_rule_error`), whose errors config.py words as one line naming the dotted key.
+`section_rule_error`), whose errors loading.py words as one line naming the dotted key.
 
 Every setting carries its allowed range where it is declared (pydantic Field
 constraints: gt/ge/lt/le on numbers, min_length on lists and strings); a new setting gets

@@ -1,5 +1,5 @@
 """Settings of the pipeline: when rounds run and where, the consistency monitor, the
-evidence a round needs (localizer.py)."""
+evidence a round needs (stream/localizer.py)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ class LocalizerSettings(Section):
     # checked against the tracked alignment. A run of monitor_frames frames the map does
     # not explain is a part of the building the floorplan lacks, clutter, or another place
     # (a kidnap, an odometry jump, a wrong mode); the monitor cannot tell them apart, so it
-    # drops neither the track nor the BEV: it starts a kidnap test (kidnap_recovery.py), whose
+    # drops neither the track nor the BEV: it starts a kidnap test (stream/recovery.py), whose
     # own filter bank must find a place that explains those frames better, or asks for a
     # global search (kidnap_contradiction).
     monitor_distance: float = Field(0.3, gt=0, le=100)  # m, a wall point within this of a floorplan wall is consistent
@@ -33,7 +33,7 @@ class LocalizerSettings(Section):
     # again (hysteresis on what is reported, not on the kidnap run; monitor.py)
     monitor_recovery_share: float = Field(0.7, ge=0, le=1)
     monitor_reference_frames: int = Field(20, ge=1, le=10_000)
-    # a monitor run starts a kidnap test (kidnap_recovery.py) only if a frame of the last
+    # a monitor run starts a kidnap test (stream/recovery.py) only if a frame of the last
     # local_frames cut through what older frames saw: this share of its wall hits landed
     # where they saw open space (RollingBEV._contradiction); else it asks for a global
     # search. Carried off, the first frame there puts 0.5-0.99 of its hits in the old
@@ -49,7 +49,7 @@ class LocalizerSettings(Section):
     # audit_margin above the tracked one and those frames saw open space through at least
     # audit_min_violation of the tracked place's walls (its Cv), a kidnap test starts on
     # those frames (no `tracking` while it runs), adopted when its bank tracks a place its
-    # round still finds so (kidnap_recovery.outscored). A score gap alone is no evidence: on the
+    # round still finds so (recovery.Places.outscored). A score gap alone is no evidence: on the
     # held-out laser windows a 10-frame round prefers another place by >= 0.1 in 4.6% of
     # the audits of a correct track
     audit_frames: int = Field(10, ge=0, le=10_000)
@@ -84,7 +84,7 @@ class LocalizerSettings(Section):
     # per-thread arenas let resident memory grow up to ~20 MiB per 1,000 frames with the rounds on
     # the worker thread; 0 leaves glibc's choice (8 per core)
     malloc_arenas: int = Field(2, ge=0, le=1024)
-    # Where a round runs (round_scheduler.py). online (default, the Localizer API and `run`):
+    # Where a round runs (stream/scheduler.py). online (default, the Localizer API and `run`):
     # on one worker beside the stream, applied exactly join_delay frames later; while no pose
     # exists, a preview round (first_fix_preview) gives the first pose at the frame where
     # inline gives it. Where a round runs is decided by the state at its start frame, so a

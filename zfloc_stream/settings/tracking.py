@@ -1,4 +1,4 @@
-"""Settings of the tracker: the filter bank over alignments and its policy (tracking.py)."""
+"""Settings of the tracker: the filter bank over alignments and its policy (tracking/filter_bank.py, tracking/policy.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from .base import Section
 
 
 class TrackingSettings(Section):
-    """Filter bank over the alignment, state anchored at the sensor (see tracking.py)."""
+    """Filter bank over the alignment, state anchored at the sensor (see tracking/filter_bank.py)."""
 
     # random-walk drift per round: variance grows with frames elapsed and metres travelled
     process_translation_std_per_frame: float = Field(0.01, ge=0, le=100)  # m per sqrt(frame), implied sensor position
@@ -73,7 +73,7 @@ class TrackingSettings(Section):
     # >= 0.61; against another building's map the frames reported `tracking` explained 0.46
     min_explained_share: float = Field(0.55, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
-    # odometry jump (tracking_policy.odometry_jumped): a step between two fused frames longer
+    # odometry jump (policy.odometry_jumped): a step between two fused frames longer
     # than odometry_jump_min_step + odometry_jump_factor x the longest of the last
     # odometry_jump_window steps (or a turn likewise), whose wall hits the BEV does not
     # explain, restarts the map and the hypotheses (status lost). 0 frames: never judged.

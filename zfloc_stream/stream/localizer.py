@@ -57,8 +57,8 @@ class Localizer:
     frame, covariance, score, confidence and the rival places. Use it as a context
     manager (or call close()) so a round running on a worker thread is stopped.
 
-    floorplan: floorplan.Floorplan (plan_loading.load_floorplan reads a ROS map YAML, an
-    image or a DXF/SVG/GeoJSON drawing). settings: config.Settings (defaults when None).
+    floorplan: plans.floorplan.Floorplan (plans.loading.load_floorplan reads a ROS map YAML, an
+    image or a DXF/SVG/GeoJSON drawing). settings: settings.loading.Settings (defaults when None).
     Deterministic for given settings (settings.seed) and frames.
     """
 
@@ -166,7 +166,7 @@ class Localizer:
                 self.rounds.request_global_search()
 
     def _restart_after_jump(self, frame, index: int) -> np.ndarray:
-        """The odometry jumped (tracking_policy.ODOMETRY_JUMP): the map and every
+        """The odometry jumped (policy.PolicyRule.ODOMETRY_JUMP): the map and every
         alignment belong to the odometry frame before the jump. The BEV starts again from
         this frame, the tracker is lost with no mode (a new one needs
         confirm_rounds_after_loss hits), rounds started before are dropped, an active prior

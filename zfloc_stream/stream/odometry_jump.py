@@ -10,7 +10,7 @@ once the hits are judged, and a BEV smeared by the jump can then confirm a wrong
 
 Each fused frame's step in the plane frame (metres and turn since the last accepted frame)
 is compared with the recent motion and with what the BEV says of the frame's wall hits
-(tracking_policy.odometry_jumped). A frame that fails is suspect: it is not `tracking`,
+(policy.odometry_jumped). A frame that fails is suspect: it is not `tracking`,
 and the next fused frame decides. Back near the track before it (closer to it than to the
 suspect frame): one bad reading, a spike (issue 29), and nothing restarts. Going on from
 the suspect frame: the odometry jumped, and the localizer restarts the map and the
@@ -93,7 +93,7 @@ class OdometryJumpWatch:
     def _why(self, pose: np.ndarray, last: np.ndarray, then: str) -> str:
         step, turn = _step(pose, last)
         recent_step, recent_turn = self._recent()
-        return (f"{policy.ODOMETRY_JUMP}: {step:.2f} m and {math.degrees(turn):.1f} deg in one frame against at most "
+        return (f"{policy.PolicyRule.ODOMETRY_JUMP}: {step:.2f} m and {math.degrees(turn):.1f} deg in one frame against at most "
                 f"{recent_step:.2f} m and {math.degrees(recent_turn):.1f} deg in the last {len(self._steps)}; {then}")
 
 

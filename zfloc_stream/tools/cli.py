@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def load_settings(*args, **kwargs):
-    """config.load_settings, imported on first use (pydantic is not needed for --help)."""
+    """settings.loading.load_settings, imported on first use (pydantic is not needed for --help)."""
     from ..settings.loading import load_settings as load
 
     return load(*args, **kwargs)

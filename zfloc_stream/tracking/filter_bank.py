@@ -19,7 +19,7 @@ Weights come from an exponentially smoothed score per mode (fresh score when mat
 running score - `unobserved_penalty` when not): w_i = softmax(weight_gain * running_score_i).
 
 Decisions (birth, confirmation, collapse, loss, ambiguity, the reported mode) are
-the policy's, one named rule each (tracking_policy.py); this module keeps the filters and
+the policy's, one named rule each (tracking/policy.py); this module keeps the filters and
 applies them. Deterministic: no randomness, ties broken by input order.
 """
 
@@ -394,7 +394,7 @@ class HypothesisTracker:
 
     @property
     def best(self) -> Mode | None:
-        """The reported mode (tracking_policy.reported_mode): the tracked mode while no
+        """The reported mode (policy.reported_mode): the tracked mode while no
         established rival outweighs it; else the heaviest confirmed mode, else the
         heaviest mode, or a newcomer clearly ahead of them."""
         return policy.reported_mode(self.modes, self._mode_by_id(self._tracked_id), self.settings)[0]

@@ -1,4 +1,4 @@
-"""The tracker's policy: every decision of the filter bank (tracking.py) as one pure
+"""The tracker's policy: every decision of the filter bank (filter_bank.py) as one pure
 function of the modes' numbers and the settings, each rule named.
 
 Scores are C = Cc - Cv of a RANSAC hypothesis; their levels depend on the map's style, so
@@ -32,30 +32,37 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from enum import StrEnum
 from typing import Protocol
 
 from ..settings.tracking import TrackingSettings
 from ..runtime.ties import tie_key
 
-BEST_STARTS_A_MODE = "best starts a mode"
-BIRTH_GAP = "birth gap"
-NEAR_TOP = "near the top"
-CONFIRMED = "confirmed"
-BEATEN_BY_RIVAL = "beaten by a rival"
-UNSEEN_COLLAPSES = "unseen collapses"
-COLLAPSED = "collapsed"
-PRUNED = "pruned"
-OVERTAKEN = "overtaken"
-WAITING_FOR_CONFIRMATION = "waiting for confirmation"
-AMBIGUITY = "ambiguity"
-THIN_EVIDENCE = "thin evidence"
-TRACKING = "tracking"
-TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
-NEWCOMER = "newcomer"
-POSE_JUMP = "pose jump"
-MAP_UNEXPLAINED = "map does not explain the frames"
-ODOMETRY_JUMP = "odometry jump"
-PRIOR_HEAD_START = "prior head start"
+
+class PolicyRule(StrEnum):
+    """The tracker's named decisions: what each rule function below returns (the rule -> function
+    -> setting -> test table is docs/status.md's). A StrEnum: it compares, prints and is logged
+    as its text."""
+
+    BEST_STARTS_A_MODE = "best starts a mode"
+    BIRTH_GAP = "birth gap"
+    NEAR_TOP = "near the top"
+    CONFIRMED = "confirmed"
+    BEATEN_BY_RIVAL = "beaten by a rival"
+    UNSEEN_COLLAPSES = "unseen collapses"
+    COLLAPSED = "collapsed"
+    PRUNED = "pruned"
+    OVERTAKEN = "overtaken"
+    WAITING_FOR_CONFIRMATION = "waiting for confirmation"
+    AMBIGUITY = "ambiguity"
+    THIN_EVIDENCE = "thin evidence"
+    TRACKING = "tracking"
+    TRACKED_KEEPS_ITS_PLACE = "tracked keeps its place"
+    NEWCOMER = "newcomer"
+    POSE_JUMP = "pose jump"
+    MAP_UNEXPLAINED = "map does not explain the frames"
+    ODOMETRY_JUMP = "odometry jump"
+    PRIOR_HEAD_START = "prior head start"
 
 
 class ModeNumbers(Protocol):
@@ -75,8 +82,8 @@ def birth_rule(rank: int, score: float, best_score: float, s: TrackingSettings) 
     a mode, or None: the best always does (the first round already gives a pose), others
     when within birth_score_gap of the best."""
     if rank == 0:
-        return BEST_STARTS_A_MODE
-    return BIRTH_GAP if score >= best_score - s.birth_score_gap else None
+        return PolicyRule.BEST_STARTS_A_MODE
+    return PolicyRule.BIRTH_GAP if score >= best_score - s.birth_score_gap else None
 
 
 def birth_hits(head_start: int) -> int:
@@ -97,8 +104,8 @@ def collapse_rule(rank: int | None, fresh: float, best_score: float, anything_fo
     matched (None: unmatched). Each hypothesis matches one mode, so rank > 0 means another
     hypothesis scored best_score."""
     if rank is None:
-        return UNSEEN_COLLAPSES if anything_found else None
-    return BEATEN_BY_RIVAL if rank > 0 and best_score - fresh > s.lost_score_gap else None
+        return PolicyRule.UNSEEN_COLLAPSES if anything_found else None
+    return PolicyRule.BEATEN_BY_RIVAL if rank > 0 and best_score - fresh > s.lost_score_gap else None
 
 
 # --- confirmation and status -------------------------------------------------------------
@@ -144,10 +151,10 @@ def loss_rule(tracked: ModeNumbers | None, leader: ModeNumbers | None, s: Tracki
     collapsed lost_rounds rounds in a row (COLLAPSED), or an established rival is reported
     instead (OVERTAKEN)."""
     if tracked is None:
-        return PRUNED
+        return PolicyRule.PRUNED
     if tracked.collapses >= s.lost_rounds:
-        return COLLAPSED
-    return OVERTAKEN if leader is not tracked else None
+        return PolicyRule.COLLAPSED
+    return PolicyRule.OVERTAKEN if leader is not tracked else None
 
 
 def round_status_rule(leader: ModeNumbers | None, modes: Sequence[ModeNumbers], tracked_id: int | None,
@@ -156,12 +163,12 @@ def round_status_rule(leader: ModeNumbers | None, modes: Sequence[ModeNumbers], 
     WAITING_FOR_CONFIRMATION (no leader with rounds_to_track hits), AMBIGUITY,
     THIN_EVIDENCE, or TRACKING (the leader is tracked)."""
     if leader is None or leader.hits < rounds_to_track(was_lost, s):
-        return WAITING_FOR_CONFIRMATION
+        return PolicyRule.WAITING_FOR_CONFIRMATION
     if has_close_rival(leader, modes, s):
-        return AMBIGUITY
+        return PolicyRule.AMBIGUITY
     if not dominates(leader, s) or (tracked_id != leader.id and not singled_out(leader, modes)):
-        return THIN_EVIDENCE
-    return TRACKING
+        return PolicyRule.THIN_EVIDENCE
+    return PolicyRule.TRACKING
 
 
 # --- the reported mode ------------------------------------------------------------------
@@ -179,11 +186,11 @@ def reported_mode(modes: Sequence[ModeNumbers], tracked: ModeNumbers | None, s: 
     heaviest = max(confirmed or modes, key=lambda m: (tie_key(m.weight), -m.id))
     if tracked is not None:
         if heaviest is not tracked and heaviest.hits >= s.rival_established_rounds:
-            return heaviest, OVERTAKEN
-        return tracked, TRACKED_KEEPS_ITS_PLACE
+            return heaviest, PolicyRule.OVERTAKEN
+        return tracked, PolicyRule.TRACKED_KEEPS_ITS_PLACE
     newcomer = max(modes, key=lambda m: (tie_key(m.weight), -m.id))
     if newcomer.running_score - heaviest.running_score > s.newcomer_score_gap:
-        return newcomer, NEWCOMER
+        return newcomer, PolicyRule.NEWCOMER
     return heaviest, None
 
 

@@ -54,19 +54,19 @@ class Rule(StrEnum):
     NO_ROUND = "no round yet"
     DECLARED_LOST = "declared lost"
     BEV_NOT_READY = "BEV not ready"
-    PRUNED = policy.PRUNED
-    COLLAPSED = policy.COLLAPSED
-    OVERTAKEN = policy.OVERTAKEN
-    WAITING_FOR_CONFIRMATION = policy.WAITING_FOR_CONFIRMATION
-    AMBIGUITY = policy.AMBIGUITY
-    THIN_EVIDENCE = policy.THIN_EVIDENCE
-    TRACKING = policy.TRACKING
+    PRUNED = policy.PolicyRule.PRUNED
+    COLLAPSED = policy.PolicyRule.COLLAPSED
+    OVERTAKEN = policy.PolicyRule.OVERTAKEN
+    WAITING_FOR_CONFIRMATION = policy.PolicyRule.WAITING_FOR_CONFIRMATION
+    AMBIGUITY = policy.PolicyRule.AMBIGUITY
+    THIN_EVIDENCE = policy.PolicyRule.THIN_EVIDENCE
+    TRACKING = policy.PolicyRule.TRACKING
     # the frame's (withhold `tracking` from one frame)
     KIDNAP_TEST = "kidnap test running"
     ODOMETRY_STEP = "odometry step in doubt"
     FRAME_UNEXPLAINED = "frame unexplained"
-    POSE_JUMP = policy.POSE_JUMP
-    MAP_UNEXPLAINED = policy.MAP_UNEXPLAINED
+    POSE_JUMP = policy.PolicyRule.POSE_JUMP
+    MAP_UNEXPLAINED = policy.PolicyRule.MAP_UNEXPLAINED
     PRIOR_DOUBTED = "prior doubted"
     PREVIEW = "preview"
 
