@@ -183,7 +183,7 @@ class Floorplan:
         if gibson:
             return cls.from_gibson_map(path, settings)
         suffix = path.suffix.lower()
-        if suffix in (".dxf", ".svg", ".geojson", ".json"):  # vector_floorplan.py reads these, above this module
+        if suffix in (".dxf", ".svg", ".geojson", ".json"):  # plans/vector.py reads these, above this module
             raise FloorplanError(f"{path}: a vector drawing; load it with zfloc_stream.plans.loading.load_floorplan (every plan format)")
         if suffix in MAP_YAML_SUFFIXES:
             if resolution is not None or origin is not None:

@@ -2,7 +2,7 @@
 
 Raster maps (a ROS map YAML and its image, a plain image, a Gibson map) are floorplan.py's;
 vector drawings (DXF, SVG, GeoJSON) and the YAML a session writes for one (`vector:` key)
-are vector_floorplan.py's, which builds on floorplan.py. This module sits above both, so
+are vector.py's, which builds on floorplan.py. This module sits above both, so
 neither imports the other's way up.
 """
 

@@ -1,4 +1,4 @@
-"""Settings of the floorplan and of the vector-plan loader (floorplan.py, vector_floorplan.py)."""
+"""Settings of the floorplan and of the vector-plan loader (plans/floorplan.py, plans/vector.py)."""
 
 from __future__ import annotations
 
