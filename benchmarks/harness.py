@@ -32,6 +32,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (a count of frames, repetitions or workers)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
 def machine() -> dict:
     """Python, numpy, CPUs (and their load), the checkout's commit, the date."""
     try:
@@ -127,26 +138,40 @@ class Benchmark:
         if seed is not None:
             common.add_argument("--seed", type=int, default=seed, help=f"random seed (default {seed})")
         if repeat is not None:
-            common.add_argument("--repeat", "--repeats", dest="repeat", type=int, default=repeat,
+            common.add_argument("--repeat", "--repeats", dest="repeat", type=positive_int, default=repeat,
                                 help=f"timed repetitions of each case (default {repeat})")
         if frames is not None:
             many = isinstance(frames, (list, tuple))
-            common.add_argument("--frames", type=int, nargs="+" if many else None, default=frames,
+            common.add_argument("--frames", type=positive_int, nargs="+" if many else None, default=frames,
                                 help=f"frames per case (default {' '.join(map(str, frames)) if many else frames})")
         if workers is not None:
-            common.add_argument("--workers", type=int, default=workers, help=f"worker processes (default {workers})")
+            common.add_argument("--workers", type=positive_int, default=workers, help=f"worker processes (default {workers})")
         if settings:
             common.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a settings override (repeatable)")
         self._out = None
         self.args = None
 
     def parse(self, argv=None) -> argparse.Namespace:
-        """Parse the command line, print the header, open --json."""
+        """Parse the command line, print the header, open --json. A bad option (an unknown
+        or invalid --set, a --json that cannot be written) is one usage error line, exit 2,
+        before anything runs."""
         self.args = self.parser.parse_args(argv)
+        if getattr(self.args, "set", None):
+            from zfloc_stream.errors import ZflocError
+            from zfloc_stream.settings.loading import load_settings
+
+            try:
+                load_settings(overrides=self.args.set)
+            except ZflocError as err:
+                self.parser.error(str(err))
+        if self.args.json:
+            try:
+                self._out = open(self.args.json, "w")
+            except OSError as err:
+                self.parser.error(f"--json {self.args.json}: {err.strerror}")
         info = machine()
         print(header_line(info), flush=True)
-        if self.args.json:
-            self._out = open(self.args.json, "w")
+        if self._out is not None:
             self.write({"header": info, "argv": list(sys.argv[1:] if argv is None else argv)})
         return self.args
 

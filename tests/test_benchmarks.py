@@ -104,3 +104,20 @@ def test_nothing_under_benchmarks_imports_tests():
 def test_the_check_catches_an_import_from_tests(tmp_path):
     (tmp_path / "bench_bad.py").write_text("import sys\nsys.path.insert(0, 'tests')\nfrom session_helpers import fake_estimate\n")
     assert sorted(reaches_into_tests(tmp_path)) == ["bench_bad.py:2: sys.path", "bench_bad.py:3: import session_helpers"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--frames", "-5"], "argument --frames: must be at least 1, got -5"),
+    (["--frames", "x"], "argument --frames: 'x' is not a whole number"),
+    (["--json", "/nonexistent/dir/rows.json"], "--json /nonexistent/dir/rows.json: No such file or directory"),
+    (["--set", "nosuch.key=1"], "unknown setting 'nosuch'"),
+    (["--set", "bev.free_margin=0.2"], "'bev.free_margin' is no longer a setting"),
+])
+def test_bad_common_options_are_one_error_line_and_exit_2(argv, message, capsys):
+    """The harness's options are checked before anything runs: no traceback, nothing written."""
+    bench = harness.Benchmark("probe", "probe", frames=10, settings=True)
+    with pytest.raises(SystemExit) as stop:
+        bench.parse(argv)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and "error:" in err[-1] and not any("Traceback" in line for line in err)
