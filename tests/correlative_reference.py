@@ -23,16 +23,10 @@ def correlative_models_reference(
 ) -> np.ndarray:
     """correlative_models the plain way (one float64 FFT per angle, every placement counted):
     what the fast version must reproduce exactly (test_correlative.py)."""
-    pts = C.thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
-    if len(pts) < 3:
+    frame = C.search_frame(floorplan, points, scale, cell, tolerance)  # the points and mask, as the fast search's
+    if frame is None:
         return np.zeros((0, 4))
-    centre = pts.mean(axis=0)
-    local = pts - centre
-    radius = float(np.linalg.norm(local, axis=1).max()) + cell
-    half = int(np.ceil(radius / cell)) + 1
-    side = 2 * half
-    spectrum, shape, mask_origin = C._mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
-    n_i, n_j = shape[0] - side + 1, shape[1] - side + 1
+    centre, local, half, spectrum, mask_origin, n_i, n_j = frame
     per_angle = max(1, peaks)
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
     found = [A._exact_peaks(spectrum, A._angle_template(local, th, cell, half), n_i, n_j, per_angle) for th in thetas_grid]

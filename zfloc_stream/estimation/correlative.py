@@ -21,6 +21,7 @@ equal bit for bit (one float64 FFT per angle) is tests/correlative_reference.py.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -132,6 +133,36 @@ def plausible_angles(bev_lines: LineSet, floorplan_lines: LineSet, angle_step_de
     return (wanted[near % 180] & close).any(axis=1)
 
 
+class SearchFrame(NamedTuple):
+    """The points and the floorplan mask of one correlative search: the points (thinned,
+    scaled) about their centre, the template's half side in cells, the mask's spectrum and
+    origin, and the number of placements with the template inside the mask (n_i x n_j)."""
+
+    centre: np.ndarray
+    local: np.ndarray
+    half: int
+    spectrum: np.ndarray
+    mask_origin: np.ndarray
+    n_i: int
+    n_j: int
+
+
+def search_frame(floorplan, points: np.ndarray, scale: float, cell: float, tolerance: float) -> SearchFrame | None:
+    """What every angle of a search shares (SearchFrame); None for fewer than 3 points
+    after thinning to the grid."""
+    pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
+    if len(pts) < 3:
+        return None
+    centre = pts.mean(axis=0)
+    local = pts - centre
+    radius = float(np.linalg.norm(local, axis=1).max()) + cell
+    half = int(np.ceil(radius / cell)) + 1
+    side = 2 * half  # the template: a square of side cells around the points' centre
+    spectrum, shape, mask_origin = _mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
+    # placements with the template inside the mask
+    return SearchFrame(centre, local, half, spectrum, mask_origin, shape[0] - side + 1, shape[1] - side + 1)
+
+
 def correlative_models(
     floorplan,
     points: np.ndarray,
@@ -158,16 +189,10 @@ def correlative_models(
     rasterisation, spectrum products and peak picking around scipy's transforms). With
     every angle searched the result is the reference's, bit for bit (tested); the angles run on the
     round's threads (threads.py), each writing its own slot."""
-    pts = thin_to_grid(np.asarray(points, dtype=float).reshape(-1, 2) * scale, cell)
-    if len(pts) < 3:
+    frame = search_frame(floorplan, points, scale, cell, tolerance)
+    if frame is None:
         return np.zeros((0, 4))
-    centre = pts.mean(axis=0)
-    local = pts - centre
-    radius = float(np.linalg.norm(local, axis=1).max()) + cell
-    half = int(np.ceil(radius / cell)) + 1
-    side = 2 * half  # the template: a square of side cells around the points' centre
-    spectrum, shape, mask_origin = _mask_spectrum(floorplan, cell, tolerance + 0.5 * cell, half)
-    n_i, n_j = shape[0] - side + 1, shape[1] - side + 1  # placements with the template inside the mask
+    centre, local, half, spectrum, mask_origin, n_i, n_j = frame
     per_angle = max(1, peaks)
     thetas_grid = np.deg2rad(np.arange(0.0, 360.0, angle_step_deg))
     n_angles = len(thetas_grid)
