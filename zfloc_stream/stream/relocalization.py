@@ -28,21 +28,32 @@ class Relocalization:
         self.found = 0  # kidnap tests adopted: another place was tracked
         self.adopted_at = -1  # frame whose test round was adopted last: rounds started before worked for the old place
 
-    def alarm(self, bev_stamp: int, contradiction: float) -> bool:
+    def alarm(self, bev_stamp: int, contradiction: float, tracked_id: int | None = None) -> bool:
         """The monitor saw the tracked place stop explaining the frames. If a recent frame
         contradicted what older frames saw (contradiction, at least kidnap_contradiction),
         a test starts: was the sensor carried off? Else it walked into what the map lacks,
-        and (False) the next round should search globally on the whole BEV."""
+        and (False) the next round should search globally on the whole BEV. tracked_id: the
+        tracked mode, whose place is in doubt if the test ends without adopting another."""
         if self.test is not None and not self.test.audit:
             return True
         if contradiction >= self.settings.localizer.kidnap_contradiction:
             # the monitor's test replaces an audit's: its frames start after the discontinuity
             # (the apartment carried off: the audit's test, on frames from 5 before the cut,
             # adopted nothing; the monitor's, started 2 frames later, adopts 20 frames after the cut)
-            self.test = KidnapTest.start(bev_stamp, self.settings, contradiction)
+            self.test = KidnapTest.start(bev_stamp, self.settings, contradiction, old_id=tracked_id)
             self.tests += 1
             return True
         return False
+
+    def reset(self) -> None:
+        """The modes were dropped (a new prior, an odometry jump): no test runs, no place is
+        in doubt."""
+        self.test = None
+        self.audit.forget()
+
+    def doubts(self, reported: Mode | None) -> bool:
+        """Is the reported mode's place in doubt (Audit.doubts)?"""
+        return reported is not None and self.audit.doubts(reported.id)
 
     def job(self, index: int, tracker: HypothesisTracker, local: LocalRefinement, bev_stamp: int) -> RoundJob | None:
         """The round that runs beside the tracker's at this round tick: the running test's,
@@ -61,7 +72,8 @@ class Relocalization:
         audited frames; that round is its first (feed it)."""
         if not self.audit.outscores(outcome, old, scheduled.plane_pose[:2], places):
             return False
-        self.test = KidnapTest.start(bev_stamp, self.settings, contradiction, since=scheduled.job.since, audit=True)
+        self.test = KidnapTest.start(bev_stamp, self.settings, contradiction, since=scheduled.job.since, audit=True,
+                                     old_id=old.id)
         self.audit.tests += 1  # not in self.tests: those the monitor started
         return True
 
@@ -77,6 +89,9 @@ class Relocalization:
         if verdict is Verdict.CARRIED_OFF:
             self.found += 1
             self.adopted_at = scheduled.job.index
+            self.audit.forget()  # the test's bank replaces the modes
+        elif verdict is Verdict.NOT_CARRIED_OFF:
+            self.audit.doubt(test.old_id)  # its frames were not explained: the old place waits for an audit
         if verdict is not Verdict.GOES_ON:
             self.test = None
         return verdict

@@ -27,6 +27,7 @@ round's status, a frame's rules only ever withhold `tracking` from one frame:
 | ODOMETRY_STEP | lost | the frame's odometry step is one the sensor cannot have made (odometry_jump.py) |
 | FRAME_UNEXPLAINED | lost | the monitor finds the frame's wall hits unexplained by the pose (monitor.py) |
 | POSE_JUMP | lost | the reported pose moved beyond pose_jump_chi2 since the last frame |
+| AUDIT_DOUBT | ambiguous | the latest audit scored the reported place below audit_doubt_share of its usual audit score, or a kidnap test on it ended without adopting another place, and no audit has scored it at its usual level since (stream/audit.py) |
 | MAP_UNEXPLAINED | ambiguous | the map explains less than min_explained_share of the latest BEV |
 | PRIOR_DOUBTED | ambiguous | the prior holds, but the frames favour a place outside it (prior.py) |
 | PREVIEW | the tracker's round status | a preview (one round on fewer frames) is reported: never a promise |
@@ -66,6 +67,7 @@ class Rule(StrEnum):
     ODOMETRY_STEP = "odometry step in doubt"
     FRAME_UNEXPLAINED = "frame unexplained"
     POSE_JUMP = policy.PolicyRule.POSE_JUMP
+    AUDIT_DOUBT = "audit doubts the place"
     MAP_UNEXPLAINED = policy.PolicyRule.MAP_UNEXPLAINED
     PRIOR_DOUBTED = "prior doubted"
     PREVIEW = "preview"
@@ -113,6 +115,7 @@ class Recovery:
 
     kidnap_test: bool = False  # a kidnap test runs (recovery.KidnapTest)
     odometry_step: bool = False  # the odometry-jump watch doubts the frame's step (odometry_jump.py)
+    audit_doubt: bool = False  # the audit doubts the reported place (stream/audit.py)
 
 
 NO_RECOVERY = Recovery()
@@ -155,6 +158,8 @@ def decide(round: RoundFacts, frame: FrameEvidence | None = None, recovery: Reco
             return Decision(Status.LOST, Rule.FRAME_UNEXPLAINED)
         if frame.pose_jumped:
             return Decision(Status.LOST, Rule.POSE_JUMP)
+        if recovery.audit_doubt:
+            return Decision(Status.AMBIGUOUS, Rule.AUDIT_DOUBT)
         if not frame.map_explains:
             return Decision(Status.AMBIGUOUS, Rule.MAP_UNEXPLAINED)
     if prior_doubted:

@@ -1,0 +1,67 @@
+"""The audit's doubt (stream/audit.py, localizer.audit_doubt_share): an audit that scores the
+tracked place below audit_doubt_share of its usual audit score withholds `tracking` from it
+until an audit scores it at its usual level again; a kidnap test on a place that ends
+without adopting another leaves that place in doubt (the tracked mode when the test
+started, not whatever the tracker reports when it ends)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from zfloc_stream.geometry.sim2 import Sim2
+from zfloc_stream.settings.loading import Settings
+from zfloc_stream.stream.audit import Audit
+from zfloc_stream.stream.monitor import REFERENCE_MIN_FRAMES
+from zfloc_stream.stream.recovery import KidnapTest, Verdict
+from zfloc_stream.stream.relocalization import Relocalization
+from zfloc_stream.stream.scheduler import RoundJob, RoundOutcome, ScheduledRound
+
+OLD = SimpleNamespace(id=3)
+
+
+def places(score):
+    """Places as an audit round sees them: nothing outscores the tracked place, which the
+    round scores `score` (None: it kept nothing there)."""
+    here = None if score is None else SimpleNamespace(score=score)
+    return SimpleNamespace(outscored=lambda *a, **k: False, best_at=lambda *a, **k: here,
+                           local=SimpleNamespace(alignment_of_mode=lambda mode: Sim2()))
+
+
+def audit_of(scores, **settings) -> Audit:
+    audit = Audit(Settings().localizer.model_copy(update=settings))
+    for score in scores:
+        assert not audit.outscores(None, OLD, np.zeros(2), places(score))
+    return audit
+
+
+def test_audit_doubt_share_is_the_drop_from_the_usual_audit_score():
+    share = Settings().localizer.audit_doubt_share
+    usual = [1.0] * REFERENCE_MIN_FRAMES
+    assert not audit_of(usual + [share]).doubts(OLD.id)  # exactly at the share
+    doubted = audit_of(usual + [np.nextafter(share, 0.0)])
+    assert doubted.doubts(OLD.id) and not doubted.doubts(OLD.id + 1)  # only that mode's place
+    assert not audit_of(usual + [0.5, 1.0]).doubts(OLD.id)  # an audit at its usual level clears it
+    assert audit_of(usual + [None]).doubts(OLD.id)  # the round kept nothing at the place
+    assert not audit_of(usual + [0.5], audit_doubt_share=0.0).doubts(OLD.id)  # 0: off
+    assert audit_of(usual + [0.5], audit_doubt_share=0.5).falls_short(np.nextafter(0.5, 0.0))
+
+
+def test_the_usual_audit_score_needs_reference_min_frames_audits():
+    assert not audit_of([1.0] * (REFERENCE_MIN_FRAMES - 1) + [0.0]).doubts(OLD.id)
+    assert audit_of([1.0] * REFERENCE_MIN_FRAMES + [0.0]).doubts(OLD.id)
+
+
+def test_a_kidnap_test_that_adopts_nothing_leaves_the_tested_place_in_doubt():
+    settings = Settings()
+    reloc = Relocalization(settings)
+    assert not reloc.alarm(20, 0.0, tracked_id=OLD.id)  # no contradiction: no test
+    assert reloc.alarm(20, settings.localizer.kidnap_contradiction, tracked_id=OLD.id)
+    test = reloc.test
+    assert isinstance(test, KidnapTest) and test.old_id == OLD.id
+    test.rounds_left = 1
+    scheduled = ScheduledRound(RoundJob(25, None, [], False, test.since), 30, np.zeros(3), 0)
+    now_reported = SimpleNamespace(id=OLD.id + 1)  # the tracker's own round moved on meanwhile
+    assert reloc.feed(scheduled, RoundOutcome(25, None, None), now_reported, None) is Verdict.NOT_CARRIED_OFF
+    assert reloc.doubts(OLD) and not reloc.doubts(now_reported) and not reloc.doubts(None)
+    reloc.reset()
+    assert not reloc.doubts(OLD)
