@@ -10,8 +10,7 @@ import numpy as np
 
 from zfloc_stream.geometry.sim2 import Sim2
 from zfloc_stream.settings.loading import Settings
-from zfloc_stream.stream.audit import Audit
-from zfloc_stream.stream.monitor import REFERENCE_MIN_FRAMES
+from zfloc_stream.stream.audit import USUAL_MIN_AUDITS, Audit
 from zfloc_stream.stream.recovery import KidnapTest, Verdict
 from zfloc_stream.stream.relocalization import Relocalization
 from zfloc_stream.stream.scheduler import RoundJob, RoundOutcome, ScheduledRound
@@ -36,7 +35,7 @@ def audit_of(scores, **settings) -> Audit:
 
 def test_audit_doubt_share_is_the_drop_from_the_usual_audit_score():
     share = Settings().localizer.audit_doubt_share
-    usual = [1.0] * REFERENCE_MIN_FRAMES
+    usual = [1.0] * USUAL_MIN_AUDITS
     assert not audit_of(usual + [share]).doubts(OLD.id)  # exactly at the share
     doubted = audit_of(usual + [np.nextafter(share, 0.0)])
     assert doubted.doubts(OLD.id) and not doubted.doubts(OLD.id + 1)  # only that mode's place
@@ -47,8 +46,8 @@ def test_audit_doubt_share_is_the_drop_from_the_usual_audit_score():
 
 
 def test_the_usual_audit_score_needs_reference_min_frames_audits():
-    assert not audit_of([1.0] * (REFERENCE_MIN_FRAMES - 1) + [0.0]).doubts(OLD.id)
-    assert audit_of([1.0] * REFERENCE_MIN_FRAMES + [0.0]).doubts(OLD.id)
+    assert not audit_of([1.0] * (USUAL_MIN_AUDITS - 1) + [0.0]).doubts(OLD.id)
+    assert audit_of([1.0] * USUAL_MIN_AUDITS + [0.0]).doubts(OLD.id)
 
 
 def test_a_kidnap_test_that_adopts_nothing_leaves_the_tested_place_in_doubt():

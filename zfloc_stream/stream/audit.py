@@ -31,9 +31,13 @@ import numpy as np
 from ..geometry.sim2 import Sim2
 from ..settings.localizer import LocalizerSettings
 from ..tracking.mode import Mode
-from .monitor import REFERENCE_MIN_FRAMES
 from .recovery import Places
 from .scheduler import RoundJob, RoundOutcome
+
+# the usual audit score needs this many audits of the mode: the median of three outlasts
+# one odd audit, and audits come every round tick only while no kidnap test runs (on the
+# offices corridor a mode re-tracked after a kidnap had 3-4 of them before the next cut)
+USUAL_MIN_AUDITS = 3
 
 
 class Audit:
@@ -76,13 +80,13 @@ class Audit:
     def falls_short(self, score: float | None) -> bool:
         """Does an audit that scored the tracked mode's place `score` (None: it kept
         nothing there) doubt it: below audit_doubt_share of the mode's usual audit score
-        (known after REFERENCE_MIN_FRAMES audits, as the monitor's usual share)?"""
+        (known after USUAL_MIN_AUDITS audits)?"""
         share = self.settings.audit_doubt_share
         if share <= 0:
             return False
         if score is None:
             return True
-        return len(self._usual) >= REFERENCE_MIN_FRAMES and score < share * float(np.median(self._usual))
+        return len(self._usual) >= USUAL_MIN_AUDITS and score < share * float(np.median(self._usual))
 
     def doubt(self, mode_id: int | None) -> None:
         """A kidnap test on the tracked mode mode_id ended without adopting another
