@@ -18,18 +18,23 @@ from zfloc_stream.stream.scheduler import RoundJob, RoundOutcome, ScheduledRound
 OLD = SimpleNamespace(id=3)
 
 
-def places(score):
+def places(score, elsewhere):
     """Places as an audit round sees them: nothing outscores the tracked place, which the
-    round scores `score` (None: it kept nothing there)."""
-    here = None if score is None else SimpleNamespace(score=score)
+    round scores `score` (None: it kept nothing there), and the best place beyond the
+    pose-jump gate `elsewhere` (None: it kept none)."""
+    here, there = (None if v is None else SimpleNamespace(score=v) for v in (score, elsewhere))
     return SimpleNamespace(outscored=lambda *a, **k: False, best_at=lambda *a, **k: here,
-                           local=SimpleNamespace(alignment_of_mode=lambda mode: Sim2()))
+                           best_elsewhere=lambda *a, **k: there, local=SimpleNamespace(alignment_of_mode=lambda mode: Sim2()))
 
 
-def audit_of(scores, **settings) -> Audit:
+def audit_of(scores, elsewhere=None, **settings) -> Audit:
+    """An audit fed rounds scoring the tracked place `scores` (the last with the best place
+    elsewhere at `elsewhere`, default as high; the earlier with none elsewhere)."""
     audit = Audit(Settings().localizer.model_copy(update=settings))
-    for score in scores:
-        assert not audit.outscores(None, OLD, np.zeros(2), places(score))
+    for i, score in enumerate(scores):
+        last = i == len(scores) - 1
+        there = (score if elsewhere is None else elsewhere) if last else None
+        assert not audit.outscores(None, OLD, np.zeros(2), places(score, there))
     return audit
 
 
@@ -40,9 +45,16 @@ def test_audit_doubt_share_is_the_drop_from_the_usual_audit_score():
     doubted = audit_of(usual + [np.nextafter(share, 0.0)])
     assert doubted.doubts(OLD.id) and not doubted.doubts(OLD.id + 1)  # only that mode's place
     assert not audit_of(usual + [0.5, 1.0]).doubts(OLD.id)  # an audit at its usual level clears it
-    assert audit_of(usual + [None]).doubts(OLD.id)  # the round kept nothing at the place
+    assert audit_of(usual + [None], elsewhere=0.3).doubts(OLD.id)  # the round kept nothing at the place
     assert not audit_of(usual + [0.5], audit_doubt_share=0.0).doubts(OLD.id)  # 0: off
-    assert audit_of(usual + [0.5], audit_doubt_share=0.5).falls_short(np.nextafter(0.5, 0.0))
+    assert audit_of(usual + [0.5], audit_doubt_share=0.5).falls_short(np.nextafter(0.5, 0.0), 0.5)
+
+
+def test_the_doubt_needs_another_place_that_fits_at_least_as_well():
+    usual = [1.0] * USUAL_MIN_AUDITS
+    assert audit_of(usual + [0.5], elsewhere=0.5).doubts(OLD.id)  # as well
+    assert not audit_of(usual + [0.5], elsewhere=np.nextafter(0.5, 0.0)).doubts(OLD.id)  # just worse
+    assert not audit_of(usual + [None], elsewhere=None).falls_short(None, None)  # nothing anywhere: no verdict
 
 
 def test_the_usual_audit_score_needs_reference_min_frames_audits():
@@ -64,3 +76,27 @@ def test_a_kidnap_test_that_adopts_nothing_leaves_the_tested_place_in_doubt():
     assert reloc.doubts(OLD) and not reloc.doubts(now_reported) and not reloc.doubts(None)
     reloc.reset()
     assert not reloc.doubts(OLD)
+
+
+def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
+    """Relocalization._joins: the bank's place is the one the tracker reports now, a mode
+    other than the tested one, which the tracker does not track (its whole BEV keeps
+    rivals): adopted. Each condition flipped: not."""
+    from zfloc_stream.estimate import Status
+
+    settings = Settings()
+    reloc = Relocalization(settings)
+    assert reloc.alarm(20, settings.localizer.kidnap_contradiction, tracked_id=OLD.id)
+    gate = {"jumped": False}
+    reloc.test.tracker = SimpleNamespace(pose_jumped=lambda a, b, xy, mode: gate["jumped"])
+    found, moved_to = SimpleNamespace(id=0, alignment=Sim2()), SimpleNamespace(id=OLD.id + 1, alignment=Sim2())
+
+    def joins(reported=moved_to, status=Status.LOST):
+        return reloc._joins(found, reported, np.zeros(2), SimpleNamespace(tracker=SimpleNamespace(status=status)))
+
+    assert joins() and joins(status=Status.AMBIGUOUS)
+    assert not joins(status=Status.TRACKING)  # the tracker tracks it: nothing to adopt
+    assert not joins(reported=OLD)  # the tested place itself
+    assert not joins(reported=None)
+    gate["jumped"] = True
+    assert not joins()  # another place than the reported one: better_place decides

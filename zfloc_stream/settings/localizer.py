@@ -56,12 +56,11 @@ class LocalizerSettings(Section):
     audit_margin: float = Field(0.05, ge=0, le=10)
     audit_min_violation: float = Field(0.05, ge=0, le=1)
     # the audit's doubt: an audit whose round scores the tracked place below
-    # audit_doubt_share of its usual audit score (the median of its earlier audits) says the
-    # recent frames are not explained as they were; the place is not `tracking` until an
-    # audit scores it so again (also after a kidnap test on it ended without adopting
-    # another place). Carried along the built-in offices, the old place's audits fell to
-    # 0.59-0.80 of usual while it was still `tracking`; no audit of a correct track there
-    # fell below 0.85. 0: off
+    # audit_doubt_share of its usual audit score (the median of its earlier audits), and
+    # another place at least as high, says the recent frames fit elsewhere as well; the
+    # place is not `tracking` until an audit no longer finds so (also after a kidnap test
+    # on it ended without adopting another place). Carried along the built-in offices, the
+    # old place's audits fell to 0.59-0.80 of usual while it was still `tracking`. 0: off
     audit_doubt_share: float = Field(0.8, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round

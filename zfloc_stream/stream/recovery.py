@@ -132,6 +132,12 @@ class Places:
         """best_at among the round's hypotheses."""
         return best_at(outcome.result.hypotheses, place, mode, self.tracker, sensor_xy)
 
+    def best_elsewhere(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
+        """The best-scored hypothesis the round kept beyond the tracker's pose-jump gate of
+        `place` (under mode's covariance); None when it kept none elsewhere."""
+        far = [h for h in outcome.result.hypotheses if self.tracker.pose_jumped(place, h.alignment, sensor_xy, mode)]
+        return max(far, key=lambda h: h.score, default=None)
+
 
 def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,
                  recent_hits: list[np.ndarray], sensor_xy, old_hits: list[np.ndarray] | None = None) -> bool:
