@@ -12,7 +12,7 @@ from zfloc_stream.geometry.sim2 import Sim2
 from zfloc_stream.settings.loading import Settings
 from zfloc_stream.stream.audit import USUAL_MIN_AUDITS, Audit
 from zfloc_stream.stream.recovery import KidnapTest, Verdict
-from zfloc_stream.stream.relocalization import Relocalization
+from zfloc_stream.stream.relocalization import JOIN_MIN_WEIGHT, Relocalization
 from zfloc_stream.stream.scheduler import RoundJob, RoundOutcome, ScheduledRound
 
 OLD = SimpleNamespace(id=3)
@@ -80,8 +80,8 @@ def test_a_kidnap_test_that_adopts_nothing_leaves_the_tested_place_in_doubt():
 
 def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
     """Relocalization._joins: the bank's place is the one the tracker reports now, a mode
-    other than the tested one, which the tracker does not track (its whole BEV keeps
-    rivals): adopted. Each condition flipped: not."""
+    other than the tested one holding at least JOIN_MIN_WEIGHT, which the tracker does not
+    track (its whole BEV keeps rivals): adopted. Each condition flipped: not."""
     from zfloc_stream.estimate import Status
 
     settings = Settings()
@@ -89,7 +89,8 @@ def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
     assert reloc.alarm(20, settings.localizer.kidnap_contradiction, tracked_id=OLD.id)
     gate = {"jumped": False}
     reloc.test.tracker = SimpleNamespace(pose_jumped=lambda a, b, xy, mode: gate["jumped"])
-    found, moved_to = SimpleNamespace(id=0, alignment=Sim2()), SimpleNamespace(id=OLD.id + 1, alignment=Sim2())
+    found = SimpleNamespace(id=0, alignment=Sim2())
+    moved_to = SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=JOIN_MIN_WEIGHT)
 
     def joins(reported=moved_to, status=Status.LOST):
         return reloc._joins(found, reported, np.zeros(2), SimpleNamespace(tracker=SimpleNamespace(status=status)))
@@ -98,5 +99,6 @@ def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
     assert not joins(status=Status.TRACKING)  # the tracker tracks it: nothing to adopt
     assert not joins(reported=OLD)  # the tested place itself
     assert not joins(reported=None)
+    assert not joins(reported=SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=np.nextafter(JOIN_MIN_WEIGHT, 0.0)))
     gate["jumped"] = True
     assert not joins()  # another place than the reported one: better_place decides
