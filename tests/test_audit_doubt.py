@@ -102,3 +102,42 @@ def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
     assert not joins(reported=SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=np.nextafter(JOIN_MIN_WEIGHT, 0.0)))
     gate["jumped"] = True
     assert not joins()  # another place than the reported one: better_place decides
+
+
+def _offices_camera_seed_1(**localizer):
+    """The repetitive building (scene 'offices', seed 1), camera, walked and carried off
+    twice as benchmarks/evaluation/eval_scenes.py --kidnap does (17.2 and 17.1 m): each
+    frame's status, the rule that gave it, its position error, and the cuts."""
+    from zfloc_stream.sim import build_scene
+    from zfloc_stream.sim.kidnap import corridor_kidnaps, played
+    from zfloc_stream.sim.simulator import SimSettings, simulate
+    from zfloc_stream.stream.localizer import Localizer
+
+    scene = build_scene("offices", seed=1)
+    poses, cuts = corridor_kidnaps(scene, 1)
+    frames, truth, at = played(list(simulate(scene, SimSettings(), seed=1, trajectory=poses)), poses, cuts)
+    statuses, rules, errors = [], [], []
+    with Localizer(scene.floorplan, Settings(seed=1, localizer=localizer)) as loc:
+        for frame, true_pose in zip(frames, truth):
+            est = loc.push(frame)
+            statuses.append(est.status)
+            rules.append(loc.last_rule)
+            errors.append(np.inf if est.pose is None else float(np.hypot(*(est.pose[:2] - true_pose[:2]))))
+    return statuses, rules, np.array(errors), at
+
+
+def test_carried_to_a_look_alike_office_the_audits_doubt_ends_tracking_at_the_old_place():
+    """Carried 17 m along the corridor, the old place's audits fall below audit_doubt_share of
+    their usual score while another office scores as high, and a kidnap test on it ends
+    without adopting another: the audit's doubt makes those frames ambiguous (frames 50-52
+    after the first cut, 110-129 and 135-139 after the second, every one 17 m off). 13
+    `tracking` frames are 1 m+ off, 41 with audit_doubt_share 0."""
+    from zfloc_stream.tracking.status import Rule
+
+    statuses, rules, errors, at = _offices_camera_seed_1()
+    off = [i for i, s in enumerate(statuses) if s == "tracking" and errors[i] >= 1.0]
+    doubted = [i for i, r in enumerate(rules) if r is Rule.AUDIT_DOUBT and i >= at[1]]
+    assert doubted and all(errors[i] >= 1.0 for i in doubted)  # every frame it withheld was 17 m off
+    statuses0, _, errors0, _ = _offices_camera_seed_1(audit_doubt_share=0.0)
+    off0 = [i for i, s in enumerate(statuses0) if s == "tracking" and errors0[i] >= 1.0]
+    assert 2 * len(off) <= len(off0), (len(off), len(off0))
