@@ -422,16 +422,12 @@ class Localizer:
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None, suspect=False) -> Estimate:
         shown = self._preview if self._preview is not None and self.tracker.best is None else self.tracker
         best = shown.best
-        if best is None or plane_pose is None:
-            pose = cov = alignment = None
-            score = float("nan")
-        else:
+        pose = cov = alignment = None
+        score = float("nan") if best is None or plane_pose is None else float(best.score)
+        if best is not None and plane_pose is not None:
             alignment = self.local.alignment_of_mode(best)
-            pose = np.array(alignment.apply_pose(*plane_pose))
-            cov = shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
-            score = float(best.score)
-        # one decision (tracking/status.py): the frame's own evidence (its hits, the pose's step),
-        # a running kidnap test and a doubtful odometry step can each withhold `tracking`
+            pose, cov = np.array(alignment.apply_pose(*plane_pose)), shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
+        # one decision (tracking/status.py): the frame's evidence, a kidnap test, a doubtful step may withhold `tracking`
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
@@ -439,15 +435,16 @@ class Localizer:
             alignment, None if plane_pose is None else plane_pose[:2], consistent, explained,
             Recovery(kidnap_test=self.relocalization.test is not None, odometry_step=suspect), self._prior.doubted,
             None if shown is self.tracker else self.tracker.round_facts)
+        # no place the map explains, none tracked: the prior's own pose stands in (AMCL's initial pose)
         unexplained = alignment is None or not policy.map_explains(explained, self.settings.tracking)
-        held = self._prior.stand_in(plane_pose, self.settings.estimator) if unexplained and plane_pose is not None else None
-        if held is not None:  # no place the map explains: the prior's own pose stands in (AMCL's initial pose)
+        held = self._prior.stand_in(plane_pose, self.settings.estimator) \
+            if unexplained and plane_pose is not None and self.tracker.tracked_mode is None else None
+        if held is not None:
             (alignment, pose, cov, confidence), score, self.last_rule = held, float("nan"), Rule.PRIOR_POSE
             status, explained = Status.LOST if status is Status.LOST else Status.INITIALIZING, None  # no place to judge the map by
         self.map_match.note(explained, status)
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
         if alternatives and pose is not None and held is None:  # the reported mode as reported: its locally refined pose
-            first = alternatives[0]
-            alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]
+            alternatives = (Alternative(alignment, pose, alternatives[0].weight, alternatives[0].score),) + alternatives[1:]
         return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped,
                         confidence, self._prior.state)
