@@ -158,9 +158,37 @@ def main(argv=None) -> int:
             for r in d[name]["rounds"]:
                 print(_fmt(r))
         sys.stdout.flush()
+    print(summary(found))
     if args.json:
         args.json.write_text(json.dumps(found, indent=1, default=str))
     return 0
+
+
+def first_round_stage(r: dict) -> str:
+    """What decided a window's first tracker round (frame 4): "right" (its winner within
+    1 m of the truth), "search" (the truth scores above the winner but no hypothesis lies
+    within 1 m of it: never proposed), "score" (a wrong place scores above the truth)."""
+    if r.get("win_off", float("inf")) < 1.0:
+        return "right"
+    return "search" if r["truth_C"] >= r.get("win_C", -np.inf) else "score"
+
+
+def summary(found: list[dict]) -> str:
+    """One row per window: its first tracker round on the plan and on the raster map."""
+    lines = ["| window | map | success | first round: stage | truth C (Cc / Cv) | winner C (Cc / Cv), m off | runner-up C |",
+             "|---|---|---|---|---|---|---|"]
+    for d in found:
+        for name in ("plan", "raster"):
+            first = next((r for r in d[name]["rounds"] if not r["preview"] and not r["audit"] and "truth_C" in r), None)
+            if first is None:
+                lines.append(f"| {d['log']}/{d['start']}/{d['length']} | {name} | {d[name]['success']} | no round | | | |")
+                continue
+            win = (f"{first['win_C']:.3f} ({first['win_Cc']:.3f} / {first['win_Cv']:.3f}), {first['win_off']:.1f}"
+                   if "win_C" in first else "-")
+            lines.append(f"| {d['log']}/{d['start']}/{d['length']} | {name} | {d[name]['success']} | {first_round_stage(first)} | "
+                         f"{first['truth_C']:.3f} ({first['truth_Cc']:.3f} / {first['truth_Cv']:.3f}) | {win} | "
+                         f"{first.get('second_C', float('nan')):.3f} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
