@@ -100,9 +100,9 @@ def camera_window(log: str, start: int, length: int, overrides=(), seed: int = 0
     return settings, seq.floorplan_for(start, start + length), frames
 
 
-def diagnose(log: str, start: int, length: int, style: str, overrides: list[str], camera: bool = False) -> dict:
+def diagnose(log: str, start: int, length: int, style: str, overrides: list[str], camera: bool = False, seed: int = 0) -> dict:
     window = camera_window if camera else eval_real.laser_window
-    settings, raster, frames = window(log, start, length, overrides)
+    settings, raster, frames = window(log, start, length, overrides, seed)
     plan = eval_real.plan_of(raster, settings, style, log, start, start + length)
     out = {"log": log, "start": start, "length": length}
     for name, fp in (("plan", plan), ("raster", raster)):
@@ -134,6 +134,7 @@ def main(argv=None) -> int:
     parser.add_argument("--window", action="append", default=[], metavar="LOG/START/LENGTH")
     parser.add_argument("--plan-style", default="one-face", choices=eval_real.PLAN_STYLES)
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--seed", type=int, default=0, help="eval_real.py's --seed (odometry noise, the localizer's seed)")
     parser.add_argument("--camera", action="store_true", help="eval_real.py's camera windows instead of laser")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
@@ -150,7 +151,7 @@ def main(argv=None) -> int:
         parser.error("no windows: pass --rows or --window")
     found = []
     for w in windows:
-        d = diagnose(*w, args.plan_style, args.set, args.camera)
+        d = diagnose(*w, args.plan_style, args.set, args.camera, args.seed)
         found.append(d)
         for name in ("plan", "raster"):
             print(f"{d['log']}/{d['start']}/{d['length']} {name}: {'ok' if d[name]['success'] else 'FAIL'}; errors "
