@@ -163,3 +163,24 @@ def test_a_round_needs_min_wall_points_and_min_primitives():
     assert lacking_evidence(observation(50, 2, 1), settings) is None  # circles count as primitives
     assert "min_wall_points" in lacking_evidence(observation(49, 3, 0), settings)
     assert "min_primitives" in lacking_evidence(observation(50, 2, 0), settings)
+
+
+def test_a_round_from_nothing_draws_at_least_the_first_fix_match_fraction():
+    """FIRST_FIX_MATCH_FRACTION: a round with no warm start (outside a kidnap test or an
+    audit) draws at least that fraction of each BEV sample's matches; a round warm-started
+    from a live mode, a kidnap test's round and a setting already at or above it keep
+    estimator.ransac.match_fraction."""
+    first = round_scheduler.FIRST_FIX_MATCH_FRACTION
+    settings = load_settings()
+    default = settings.estimator.ransac.match_fraction
+    assert default < first
+    fraction = lambda job, s=settings: round_scheduler.round_estimator_settings(s, job).ransac.match_fraction
+    from zfloc_stream.geometry.sim2 import Sim2
+
+    assert fraction(RoundJob(4, None, [], False)) == first
+    assert fraction(RoundJob(9, None, [Sim2.identity()], False)) == default
+    assert fraction(RoundJob(9, None, [], False, since=3)) == default
+    assert fraction(RoundJob(9, None, [Sim2.identity()], False, since=3, audit=True)) == default
+    for at in (first - 1e-9, first, first + 0.05):
+        s = load_settings(overrides=[f"estimator.ransac.match_fraction={at}"])
+        assert fraction(RoundJob(4, None, [], False), s) == max(at, first)

@@ -437,6 +437,10 @@ def plan_table(rows: list[dict], lengths: list[int], reference: bool) -> str:
         methods.append(("zfloc-stream on the raster map (same windows)", "raster_success"))
         for name, key in methods:
             lines.append(f"| {name} | {' | '.join(_pct([r[key] for r in by_len[L]]) for L in lengths)} | {_pct([r[key] for r in mine])} |")
+        for name, key in methods:  # the bar is per length on the covered windows too
+            cov = {L: [r[key] for r in by_len[L] if r["coverage"] >= PLAN_COVERAGE] for L in lengths}
+            lines.append(f"| {name}, plan coverage >= {PLAN_COVERAGE} | {' | '.join(f'{sum(cov[L])}/{len(cov[L])}' for L in lengths)} | "
+                         f"{_pct([v for L in lengths for v in cov[L]])} |")
         lines += ["", "| plan coverage | windows | on the plan | on the raster map |" + (" exact search on the plan |" if reference else ""),
                   "|---|---|---|---|" + ("---|" if reference else "")]
         for label, keep in ((f">= {PLAN_COVERAGE}", lambda c: c >= PLAN_COVERAGE), (f"< {PLAN_COVERAGE}", lambda c: c < PLAN_COVERAGE)):

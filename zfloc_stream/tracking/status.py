@@ -27,9 +27,10 @@ round's status, a frame's rules only ever withhold `tracking` from one frame:
 | ODOMETRY_STEP | lost | the frame's odometry step is one the sensor cannot have made (odometry_jump.py) |
 | FRAME_UNEXPLAINED | lost | the monitor finds the frame's wall hits unexplained by the pose (monitor.py) |
 | POSE_JUMP | lost | the reported pose moved beyond pose_jump_chi2 since the last frame |
-| AUDIT_DOUBT | ambiguous | the latest audit scored the reported place below audit_doubt_share of its usual audit score, or a kidnap test on it ended without adopting another place, and no audit has scored it at its usual level since (stream/audit.py) |
+| AUDIT_DOUBT | ambiguous | the latest audit scored the reported place below audit_doubt_share of its usual audit score and another place at least as high, or a kidnap test on it ended without adopting another place, and no audit has cleared it since (stream/audit.py) |
 | MAP_UNEXPLAINED | ambiguous | the map explains less than min_explained_share of the latest BEV |
 | PRIOR_DOUBTED | ambiguous | the prior holds, but the frames favour a place outside it (prior.py) |
+| PRIOR_POSE | initializing (lost stays lost) | the prior's own pose is reported: no place the map explains (prior.PriorWatch.stand_in; set by the localizer) |
 | PREVIEW | the tracker's round status | a preview (one round on fewer frames) is reported: never a promise |
 
 The rules on the bank's numbers are tracking/policy.py's (one setting each, boundary-tested
@@ -70,6 +71,7 @@ class Rule(StrEnum):
     AUDIT_DOUBT = "audit doubts the place"
     MAP_UNEXPLAINED = policy.PolicyRule.MAP_UNEXPLAINED
     PRIOR_DOUBTED = "prior doubted"
+    PRIOR_POSE = "prior's own pose"
     PREVIEW = "preview"
 
 
