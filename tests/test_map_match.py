@@ -17,10 +17,6 @@ def test_min_explained_share_boundary():
     assert policy.map_explains(0.55, s)
     assert not policy.map_explains(float(np.nextafter(0.55, 0.0)), s)
     assert policy.map_explains(None, s)  # nothing to judge yet: the other rules decide
-    start = 0.55 + s.confidence_share_band  # a frame that would start a `tracking` run
-    assert policy.map_explains(start, s, starting=True)
-    assert not policy.map_explains(float(np.nextafter(start, 0.0)), s, starting=True)
-    assert policy.map_explains(None, s, starting=True)
 
 
 def test_verdict_only_for_a_run_that_never_tracked():
@@ -59,7 +55,7 @@ def test_wrong_map_never_tracks_and_is_said(office_frames):
     assert sum(e.pose is not None for e in estimates) >= MIN_JUDGED_FRAMES
     assert not any(e.status == "tracking" for e in estimates)
     assert verdict is not None and "does not match" in verdict
-    # no pose here is right: the confidence says so (tracking/confidence.py, the map's fit)
+    # no pose here is right, and the confidence says so (tracking/confidence.py: the map's fit)
     assert max(e.confidence for e in estimates if e.pose is not None) < 0.1
 
 

@@ -442,22 +442,6 @@ def test_assess_frame_withholds_tracking_when_the_frames_evidence_contradicts_th
     assert tracker.assess_frame(jumped, sensor, True)[0] == "tracking"  # the next frame steps from there
 
 
-def test_a_tracking_run_starts_where_the_map_explains_min_share_plus_band_and_goes_on_down_to_min_share():
-    """MAP_UNEXPLAINED's two levels (policy.map_explains): a frame that would start a run of
-    `tracking` frames needs min_explained_share + confidence_share_band, the next ones
-    min_explained_share; a frame not `tracking` ends the run."""
-    tracker, sensor = _tracked()
-    a, s = tracker.best.alignment, tracker.settings
-    start, keep = s.min_explained_share + s.confidence_share_band, s.min_explained_share
-    assert tracker.assess_frame(a, sensor, True, float(np.nextafter(start, 0.0)))[0] == "ambiguous"
-    assert tracker.assess_frame(a, sensor, True, start)[0] == "tracking"
-    assert tracker.assess_frame(a, sensor, True, keep)[0] == "tracking"  # the run goes on
-    assert tracker.assess_frame(a, sensor, True, float(np.nextafter(keep, 0.0)))[0] == "ambiguous"
-    assert tracker.assess_frame(a, sensor, True, keep)[0] == "ambiguous"  # ended: must start again
-    assert tracker.assess_frame(a, sensor, True, None)[0] == "tracking"  # nothing judged: no verdict
-    assert tracker.assess_frame(a, sensor, True, keep)[0] == "tracking"
-
-
 def test_assess_frame_never_upgrades_a_status_and_scales_confidence_by_confirmation():
     rng = make_rng(7, "frame")
     tracker = HypothesisTracker(TrackingSettings(confirm_rounds=3))

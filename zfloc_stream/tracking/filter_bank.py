@@ -70,7 +70,6 @@ class HypothesisTracker:
         self._was_lost = False
         self._round = RoundFacts()  # what the latest round established (status.decide reads it)
         self._last_reported: Sim2 | None = None  # the alignment judge_frame saw last
-        self._vouched_id: int | None = None  # the mode the last judged frame reported `tracking` (None: not tracking)
 
     def declare_lost(self) -> None:
         """Drop every mode and report lost: the localizer saw the tracked alignment stop
@@ -321,9 +320,7 @@ class HypothesisTracker:
         `tracking` (status.decide): its wall hits are not explained by the reported
         alignment (frame_consistent False, the localizer's monitor; an odometry spike or
         jump lands here), the pose jumped (pose_jumped), or the map explains too little
-        of the BEV (explained below min_explained_share, or below min_explained_share +
-        confidence_share_band on a frame that would start a run of `tracking` frames:
-        MAP_UNEXPLAINED, policy.map_explains); so can the
+        of the BEV (explained below min_explained_share: MAP_UNEXPLAINED); so can the
         recovery, a doubted prior and, when this bank is a preview, the tracker's own
         round (preview_of).
 
@@ -341,13 +338,11 @@ class HypothesisTracker:
             decision = decide(self._round, None, recovery, prior_doubted, preview_of)
             confidence = float("nan")
         else:
-            starting = best.id != self._vouched_id  # a `tracking` run starts here: the map must explain more
             frame = FrameEvidence(frame_consistent, self.pose_jumped(previous, alignment, sensor_xy, best),
-                                  policy.map_explains(explained, self.settings, starting))
+                                  policy.map_explains(explained, self.settings))
             decision = decide(self._round, frame, recovery, prior_doubted, preview_of)
             confidence = frame_confidence(best.weight, best.hits / self.rounds_to_track(), explained, decision,
                                           contradicts(frame, recovery), self.settings)
-        self._vouched_id = best.id if best is not None and decision.status is Status.TRACKING else None
         return decision, confidence
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:

@@ -22,7 +22,7 @@ softmax(weight_gain * running score) over the live modes.
 | TRACKED_KEEPS_ITS_PLACE | the tracked mode is reported unless an established rival outweighs it | rival_established_rounds |
 | NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
 | POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
-| MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share (+ confidence_share_band to start a `tracking` run) is not `tracking` | min_explained_share, confidence_share_band |
+| MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share is not `tracking` | min_explained_share |
 | ODOMETRY_JUMP | an odometry step far beyond the recent motion whose hits the BEV does not explain: map and modes restart, `lost` | odometry_jump_window, odometry_jump_min_step, odometry_jump_min_turn_deg, odometry_jump_factor |
 
 docs/status.md has the table rule -> function -> setting -> test.
@@ -200,20 +200,15 @@ def pose_jumped(mahalanobis2: float, s: TrackingSettings) -> bool:
     return mahalanobis2 > s.pose_jump_chi2
 
 
-def map_explains(share: float | None, s: TrackingSettings, starting: bool = False) -> bool:
+def map_explains(share: float | None, s: TrackingSettings) -> bool:
     """MAP_UNEXPLAINED when False: under the reported alignment less than
-    min_explained_share of the latest BEV's wall points lie near a plan wall, or, on a frame
-    that would start a run of `tracking` frames (starting: the previous frame did not report
-    this mode `tracking`), less than min_explained_share + confidence_share_band, where the
-    map's fit in Estimate.confidence is full (tracking/confidence.py). The one rule that
-    compares with a level, not a gap: a gap says which place is best, not whether any place
-    in this map is right (on another building's map the best place can hold almost all of
-    the weight while its map explains under half of what the sensor saw; tracks that
-    started there explained 0.575-0.62, on the right maps a track starting below 0.7 is
-    rare: docs/measurements/status.md). A track started goes on down to
-    min_explained_share (parts the map lacks). None (no BEV to judge yet) does not withhold
-    `tracking`."""
-    return share is None or share >= s.min_explained_share + (s.confidence_share_band if starting else 0.0)
+    min_explained_share of the latest BEV's wall points lie near a plan wall. The one rule
+    that compares with a level, not a gap: a gap says which place is best, not whether any
+    place in this map is right (on another building's map the best place can hold almost
+    all of the weight while its map explains under half of what the sensor saw; the
+    numbers are in docs/measurements/status.md). None (no BEV to judge yet) does not
+    withhold `tracking`."""
+    return share is None or share >= s.min_explained_share
 
 
 def odometry_jumped(step: float, turn: float, recent_step: float, recent_turn: float, bev_explains: bool,
