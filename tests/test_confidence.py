@@ -7,7 +7,8 @@ import pytest
 
 from zfloc_stream.estimate import Status
 from zfloc_stream.settings.loading import TrackingSettings
-from zfloc_stream.tracking.confidence import frame_confidence, map_fit
+from zfloc_stream.tracking.confidence import frame_confidence
+from zfloc_stream.tracking.policy import map_fit
 from zfloc_stream.tracking.status import Decision, Rule
 
 S = TrackingSettings()
@@ -18,7 +19,7 @@ def test_confidence_share_band_is_the_ramp_around_min_explained_share():
     m, band = S.min_explained_share, S.confidence_share_band
     assert (m, band) == (0.55, 0.15)
     assert map_fit(m - band, S) == 0.0 and map_fit(float(np.nextafter(m - band, 1.0)), S) > 0.0
-    assert map_fit(m, S) == pytest.approx(0.5)  # where MAP_UNEXPLAINED withholds `tracking`
+    assert map_fit(m, S) == pytest.approx(0.5)
     assert map_fit(float(np.nextafter(m + band, 0.0)), S) < 1.0 and map_fit(m + band, S) == pytest.approx(1.0)
     assert map_fit(1.0, S) == 1.0 and map_fit(0.0, S) == 0.0
     assert map_fit(None, S) == 1.0  # nothing judged yet: no evidence against the pose

@@ -9,8 +9,8 @@ product of the evidence the localizer already has for the frame's pose:
 - weight: the reported mode's share of the filter bank's weight (against the other places
   the rounds found in this map);
 - confirmation: its hits / the rounds it needs to be tracked (at most 1);
-- map_fit: does this map explain what the sensor sees at all? A linear ramp in the share of
-  the latest BEV's wall points the map explains under the pose (map_match.py): 0 at
+- map_fit (policy.map_fit): does this map explain what the sensor sees at all? A linear
+  ramp in the share of the latest BEV's wall points the map explains under the pose (map_match.py): 0 at
   min_explained_share - confidence_share_band, 1/2 at min_explained_share (where the
   MAP_UNEXPLAINED rule withholds `tracking`), 1 at min_explained_share +
   confidence_share_band; 1 while nothing is judged (no BEV yet).
@@ -23,7 +23,10 @@ and then, from the status decision:
   reported now has not earned any trust;
 - at most dominance_weight unless the decision vouches for the pose (status.vouches:
   `tracking`, or a preview of a bank that would be): a mode the round did not single out
-  can carry almost all of the weight and be wrong.
+  can carry almost all of the weight and be wrong. The other way round, a `tracking` frame
+  whose weight times map_fit is at most dominance_weight is not `tracking`
+  (MAP_UNEXPLAINED, policy.map_explains): a threshold at dominance_weight on the confidence
+  and the status `tracking` select the same frames.
 
 Why the map's fit: weight and confirmation compare the places of one map with each other,
 so on another building's map the best place can hold all of the weight (up to 0.9 on
@@ -39,21 +42,10 @@ docs/measurements/status.md.
 
 from __future__ import annotations
 
+from .policy import map_fit
 from .status import Decision, vouches
 from ..estimate import Status
 from ..settings.tracking import TrackingSettings
-
-
-def map_fit(explained: float | None, s: TrackingSettings) -> float:
-    """In [0, 1]: how far the map's explained share of the latest BEV supports the pose; a
-    ramp of half-width confidence_share_band around min_explained_share. None (nothing
-    judged yet) does not lower the confidence."""
-    if explained is None:
-        return 1.0
-    band = s.confidence_share_band
-    if band <= 0:  # a step at min_explained_share
-        return 1.0 if explained >= s.min_explained_share else 0.0
-    return min(1.0, max(0.0, (explained - s.min_explained_share + band) / (2.0 * band)))
 
 
 def frame_confidence(weight: float, confirmation: float, explained: float | None, decision: Decision,

@@ -320,14 +320,15 @@ class HypothesisTracker:
         `tracking` (status.decide): its wall hits are not explained by the reported
         alignment (frame_consistent False, the localizer's monitor; an odometry spike or
         jump lands here), the pose jumped (pose_jumped), or the map explains too little
-        of the BEV (explained below min_explained_share: MAP_UNEXPLAINED); so can the
+        of the BEV for the mode's weight to count (MAP_UNEXPLAINED: weight times
+        policy.map_fit of explained at most dominance_weight); so can the
         recovery, a doubted prior and, when this bank is a preview, the tracker's own
         round (preview_of).
 
         confidence in [0, 1], for a caller to threshold, the same on every map
         (confidence.frame_confidence): the reported mode's share of the bank's weight,
         times how far it is confirmed (hits / rounds_to_track, at most 1), times how far
-        the map explains the latest BEV (confidence.map_fit of explained, the share of its
+        the map explains the latest BEV (policy.map_fit of explained, the share of its
         wall points the map explains under the alignment, map_match.py); at most
         dominance_weight unless the decision vouches for the pose (status.vouches); 0 on a
         `lost` frame or one whose evidence contradicts its pose. nan before any mode.
@@ -339,7 +340,7 @@ class HypothesisTracker:
             confidence = float("nan")
         else:
             frame = FrameEvidence(frame_consistent, self.pose_jumped(previous, alignment, sensor_xy, best),
-                                  policy.map_explains(explained, self.settings))
+                                  policy.map_explains(explained, best.weight, self.settings))
             decision = decide(self._round, frame, recovery, prior_doubted, preview_of)
             confidence = frame_confidence(best.weight, best.hits / self.rounds_to_track(), explained, decision,
                                           contradicts(frame, recovery), self.settings)
