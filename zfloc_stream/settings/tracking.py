@@ -75,7 +75,7 @@ class TrackingSettings(Section):
     # Estimate.confidence scales with how far the map explains the latest BEV: a ramp from 0
     # at min_explained_share minus this to 1 at min_explained_share plus this (tracking/
     # confidence.py; 0: a step). 0.15: the narrowest band at which no laser frame on another
-    # building's map reached 0.9 (the windows it was chosen on; on the others 10 of 31,000
+    # building's map reached 0.9 (the windows it was chosen on; on the others 10 of 26,400
     # frames did, look-alike corridors; camera windows and sessions, scenes: none)
     confidence_share_band: float = Field(0.15, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
