@@ -76,7 +76,7 @@ class TrackingSettings(Section):
     # at 0.46 (before this rule), laser windows at 0.575-0.62. Band 0: a step at this share
     min_explained_share: float = Field(0.55, ge=0, le=1)
     # 0.15: the narrowest band at which no laser frame on another building's map reached
-    # confidence 0.9 (the windows it was chosen on; on the others 10 of 31,000 frames did,
+    # confidence 0.9 (the windows it was chosen on; on the others 10 of 26,400 frames did,
     # look-alike corridors; camera windows and sessions, scenes: none)
     confidence_share_band: float = Field(0.15, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking

@@ -37,7 +37,7 @@ maps and every other building's map) as the narrowest at which no wrong-map fram
 0.9 and frames >= 0.7 were 99% within 1 m (two windows per log and length on every other
 log's map); checked on data it was not chosen on: the camera windows and the camera
 sessions on other buildings' maps (no frame >= 0.9), the other six laser windows per log
-and length on every other map (10 of 31,000 frames >= 0.9, where a corridor of one
+and length on every other map (10 of 26,400 frames >= 0.9, where a corridor of one
 building looks like another's: the map explained all of the frames), the built-in scenes
 on their own and on another scene's map (none): docs/measurements/status.md.
 """
