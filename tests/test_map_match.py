@@ -19,12 +19,18 @@ def test_map_unexplained_boundary_is_weight_times_fit_at_dominance_weight():
     assert (s.min_explained_share, s.confidence_share_band, s.dominance_weight) == (0.55, 0.15, 0.9)
     at = {1.0: 0.67, 0.95: 0.4 + 0.3 * 0.9 / 0.95}  # the share where weight * fit = 0.9
     for weight, share in at.items():
-        assert policy.map_explains(share + 1e-9, weight, s)
-        assert not policy.map_explains(share - 1e-9, weight, s)
-    assert not policy.map_explains(1.0, 0.9, s)  # a mode at dominance_weight is never enough
-    assert policy.map_explains(None, 0.95, s)  # nothing to judge yet: the other rules decide
+        assert policy.map_vouches(share + 1e-9, weight, s)
+        assert not policy.map_vouches(share - 1e-9, weight, s)
+    assert not policy.map_vouches(1.0, 0.9, s)  # a mode at dominance_weight is never enough
+    assert policy.map_vouches(None, 0.95, s)  # nothing to judge yet: the other rules decide
     step = s.model_copy(update={"confidence_share_band": 0.0})  # the band off: the share alone, at min_explained_share
-    assert policy.map_explains(0.55, 0.95, step) and not policy.map_explains(float(np.nextafter(0.55, 0.0)), 0.95, step)
+    assert policy.map_vouches(0.55, 0.95, step) and not policy.map_vouches(float(np.nextafter(0.55, 0.0)), 0.95, step)
+
+
+def test_min_explained_share_boundary():
+    s = TrackingSettings()
+    assert policy.map_explains(0.55, s) and not policy.map_explains(float(np.nextafter(0.55, 0.0)), s)
+    assert policy.map_explains(None, s)
 
 
 def test_verdict_only_for_a_run_that_never_tracked():

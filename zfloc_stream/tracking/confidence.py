@@ -25,7 +25,7 @@ and then, from the status decision:
   `tracking`, or a preview of a bank that would be): a mode the round did not single out
   can carry almost all of the weight and be wrong. The other way round, a `tracking` frame
   whose weight times map_fit is at most dominance_weight is not `tracking`
-  (MAP_UNEXPLAINED, policy.map_explains): a threshold at dominance_weight on the confidence
+  (MAP_UNEXPLAINED, policy.map_vouches): a threshold at dominance_weight on the confidence
   and the status `tracking` select the same frames.
 
 Why the map's fit: weight and confirmation compare the places of one map with each other,

@@ -340,7 +340,7 @@ class HypothesisTracker:
             confidence = float("nan")
         else:
             frame = FrameEvidence(frame_consistent, self.pose_jumped(previous, alignment, sensor_xy, best),
-                                  policy.map_explains(explained, best.weight, self.settings))
+                                  policy.map_vouches(explained, best.weight, self.settings))
             decision = decide(self._round, frame, recovery, prior_doubted, preview_of)
             confidence = frame_confidence(best.weight, best.hits / self.rounds_to_track(), explained, decision,
                                           contradicts(frame, recovery), self.settings)

@@ -214,18 +214,26 @@ def map_fit(explained: float | None, s: TrackingSettings) -> float:
     return min(1.0, max(0.0, (explained - s.min_explained_share + band) / (2.0 * band)))
 
 
-def map_explains(share: float | None, weight: float, s: TrackingSettings) -> bool:
+def map_explains(share: float | None, s: TrackingSettings) -> bool:
+    """Does the map explain the latest BEV at all: at least min_explained_share of its wall
+    points lie near a plan wall under the reported alignment (None: nothing to judge yet).
+    Where the fit is a yes or no (the prior's own pose stands in below it); the status rule
+    weighs the fit with the mode's weight (map_vouches)."""
+    return share is None or share >= s.min_explained_share
+
+
+def map_vouches(share: float | None, weight: float, s: TrackingSettings) -> bool:
     """MAP_UNEXPLAINED when False: the map's fit (map_fit of the share of the latest BEV's
     wall points near a plan wall under the reported alignment) leaves the reported mode's
     weight at or below dominance_weight: weight * map_fit <= dominance_weight. So a frame is
     `tracking` only while its confidence (tracking/confidence.py) exceeds dominance_weight,
     on every map: with weight 1 the share must exceed min_explained_share +
-    confidence_share_band * 0.8 (0.67 by default); with confidence_share_band 0, it must
-    reach min_explained_share. The one rule that compares with a level, not a gap: a gap
-    says which place is best, not whether any place in this map is right (on another
-    building's map the best place can hold all of the weight while its map explains 0.575-
-    0.62 of what the sensor saw; docs/measurements/status.md). None (no BEV to judge yet)
-    does not withhold `tracking`."""
+    confidence_share_band * 0.8 (0.67 by default); with confidence_share_band 0 it must
+    reach min_explained_share (map_explains). The one rule that compares with a level, not
+    a gap: a gap says which place is best, not whether any place in this map is right (on
+    another building's map the best place can hold all of the weight while its map explains
+    0.575-0.62 of what the sensor saw; docs/measurements/status.md). None (no BEV to judge
+    yet) does not withhold `tracking`."""
     return share is None or weight * map_fit(share, s) > s.dominance_weight
 
 

@@ -104,7 +104,7 @@ class FrameEvidence:
 
     consistent: bool | None = None  # monitor.frame_consistent on its wall hits (None: too few to judge)
     pose_jumped: bool = False  # policy.pose_jumped on the reported pose's step
-    map_explains: bool = True  # policy.map_explains on the latest BEV
+    map_explains: bool = True  # policy.map_vouches on the latest BEV and the mode's weight
 
 
 @dataclass(frozen=True)
