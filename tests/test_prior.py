@@ -216,7 +216,7 @@ def test_cli_wrong_prior_warns_once_and_the_session_replays_with_it(tmp_path, ca
 
     sample = Path(__file__).resolve().parents[1] / "replay" / "office-laser.mcap"
     out = tmp_path / "out"
-    assert main(["run", "--input", str(sample), "--scans", "0:15", "--initial-pose", "0,0,0,1,10", "--out", str(out),
+    assert main(["run", "--input", str(sample), "--scans", "0:25", "--initial-pose", "0,0,0,1,10", "--out", str(out),
                  "--no-progress"]) == 0
     captured = capsys.readouterr()
     warnings = [line for line in (captured.out + captured.err).splitlines() if line.startswith("warning:")]
@@ -237,3 +237,35 @@ def test_region_prior_resolves_the_symmetric_ambiguity(symmetric):
     tracking = [k for k, e in enumerate(est) if e.status == "tracking"]
     assert tracking and tracking[0] <= 10, [e.status for e in est]
     assert (_errors(est, poses)[tracking] < 1.0).all()
+
+
+def test_the_priors_own_pose_stands_in_where_no_place_is_found(symmetric):
+    """Before the first round, and on a map that lacks what the frames see, the prior's own
+    pose (carried by odometry) is the estimate: `initializing`, rule PRIOR_POSE, the prior's
+    covariance, a confidence that never reaches 0.5; without a prior no pose at all."""
+    from zfloc_stream.prior import PRIOR_POSE_MAX_CONFIDENCE
+    from zfloc_stream.tracking.status import Rule
+
+    scene, frames, poses = symmetric
+    prior = Prior.at(*poses[0], 2.0, math.radians(20))
+    with Localizer(scene.floorplan, Settings(), prior=prior) as loc:
+        first = loc.push(frames[0])
+        assert loc.last_rule is Rule.PRIOR_POSE
+    assert first.status == "initializing" and first.pose is not None
+    assert np.linalg.norm(first.pose[:2] - poses[0][:2]) < 0.05
+    assert np.allclose(np.diag(first.covariance), [4.0, 4.0, math.radians(20) ** 2])
+    assert first.confidence == pytest.approx(1 - math.exp(-0.5 / 4.0)) and first.confidence < PRIOR_POSE_MAX_CONFIDENCE
+    with Localizer(scene.floorplan, Settings()) as loc:
+        assert loc.push(frames[0]).pose is None
+
+    # a floorplan with no wall near the walk: no place explains the frames, the prior's pose
+    # follows the odometry (within the simulator's drift), never `tracking`
+    from zfloc_stream.plans.floorplan import Floorplan
+
+    occupied = np.zeros((60, 60), dtype=bool)
+    occupied[30, 10:50] = True  # one 4 m wall, 400 m from the walk
+    far = Floorplan.from_occupancy(occupied, 0.1, (400.0, 400.0))
+    with Localizer(far, Settings(), prior=prior) as loc:
+        est = [loc.push(f) for f in frames[:20]]
+    assert all(e.status != "tracking" for e in est)
+    assert (_errors(est, poses[:20]) < 1.0).all()

@@ -13,7 +13,7 @@ import pytest
 
 from zfloc_stream.estimation.results import Hypothesis
 from zfloc_stream.geometry.sim2 import Sim2
-from zfloc_stream.prior import ACTIVE, CONTRADICTED, RELEASED, Prior, PriorWatch
+from zfloc_stream.prior import ACTIVE, CONTRADICTED, RELEASED, SAME_PLACE, Prior, PriorWatch
 from zfloc_stream.settings.loading import load_settings
 
 SIGMA_THETA = math.radians(15.0)
@@ -97,11 +97,11 @@ def round_of(score_in: float, score_out: float) -> list[Hypothesis]:
 
 def test_contradiction_gap_is_how_far_the_best_outside_may_lead():
     """prior.contradiction_gap=0.3: a round whose best outside leads the best inside by just
-    over 0.3 contradicts the prior (contradiction_rounds 1); by just under it keeps it and
+    over 0.3 contradicts the prior (at contradiction_rounds 1); by just under it keeps it and
     prunes the outside hypothesis."""
-    over = watch("prior.contradiction_gap=0.3").weigh(round_of(0.5, 0.5 + 0.3 + 1e-6))
+    over = watch("prior.contradiction_gap=0.3", "prior.contradiction_rounds=1").weigh(round_of(0.5, 0.5 + 0.3 + 1e-6))
     assert over.contradicted
-    under_watch = watch("prior.contradiction_gap=0.3")
+    under_watch = watch("prior.contradiction_gap=0.3", "prior.contradiction_rounds=1")
     under = under_watch.weigh(round_of(0.5, 0.5 + 0.3 - 1e-6))
     assert not under.contradicted and under_watch.state == ACTIVE
     assert [h.alignment for h in under.hypotheses] == [INSIDE]
@@ -152,3 +152,19 @@ def test_release_rounds_is_how_long_a_mode_inside_is_tracked_before_release():
         w.weigh(round_of(1.0, 0.0))
         w.after_round(INSIDE, tracked_rounds=tracked)
         assert (w.state == RELEASED) is released, tracked
+
+
+def test_contradicting_rounds_count_only_while_they_name_one_place():
+    """SAME_PLACE: at the default contradiction_rounds (2), a second contradicting round
+    whose leading place outside implies a frame position SAME_PLACE (plus a hair) from the
+    first round's starts the count over; just within it, the prior is dropped."""
+    def second(shift: float) -> PriorWatch:
+        w = watch()
+        assert not w.weigh(round_of(0.0, 1.0)).contradicted and w.against == 1
+        moved = Sim2(1.0, 0.0, (30.0, shift))
+        w.weigh([Hypothesis(INSIDE, 0.0, 0.0, 0.0, "3L"), Hypothesis(moved, 1.0, 1.0, 0.0, "3L")])
+        return w
+
+    assert second(SAME_PLACE - 1e-6).state == CONTRADICTED
+    apart = second(SAME_PLACE + 1e-6)
+    assert apart.state == ACTIVE and apart.against == 1 and apart.doubted

@@ -36,9 +36,16 @@ import numpy as np
 
 from .errors import InputError
 from .settings.prior import PriorSettings
-from .geometry.sim2 import wrap_angle
+from .geometry.sim2 import Sim2, wrap_angle
 
 PRIOR = "prior"  # the solver label of the seeds a pose prior adds (estimation.results.Hypothesis.solver)
+# m: two rounds' best places outside the prior are one place when the poses they imply for
+# the prior's frame are this close (a place found again is refined to within a few cm; the
+# spurious winners of a small BEV where the map lacks the place jump by metres from round to
+# round: held-out windows, /work/notes measurements in docs/measurements/prior.md)
+SAME_PLACE = 1.0
+# an unverified pose (the prior's own) never reaches a confidence threshold of this or above
+PRIOR_POSE_MAX_CONFIDENCE = 0.5
 
 
 def _finite(values, what: str) -> np.ndarray:
@@ -171,6 +178,17 @@ class BoundPrior:
             ok &= inside_polygon(xy, p.region)
         return ok
 
+    def alignment(self, scale: float) -> Sim2 | None:
+        """The alignment (odometry plane -> floorplan) that puts the prior's frame at the
+        prior's pose, at the given scale; None for a region alone."""
+        p = self.prior
+        if p.pose is None:
+            return None
+        theta = float(wrap_angle(p.pose[2] - self.anchor[2]))
+        c, s = math.cos(theta), math.sin(theta)
+        ax, ay = self.anchor[:2]
+        return Sim2(scale, theta, (p.pose[0] - scale * (c * ax - s * ay), p.pose[1] - scale * (s * ax + c * ay)))
+
     def log_density(self, models: np.ndarray) -> np.ndarray:
         """log p of each model row's implied pose under a pose prior, up to a constant
         (-d^2 / 2, d the Mahalanobis distance in position and heading; 0 for a region)."""
@@ -247,12 +265,18 @@ class PriorWatch:
     weight_gain: float = 15.0  # tracking.weight_gain: a score unit is this much log weight
     bound: BoundPrior | None = None
     state: str | None = None
-    against: int = 0  # contradicting rounds in a row
+    against: int = 0  # contradicting rounds in a row (naming one place: _count_against)
+    against_at: np.ndarray | None = None  # the position their leading place implies for the prior's frame
     since_frame: int = field(default=-1)  # the frame the prior describes (-1: not bound yet)
     margin: float = -np.inf  # the latest weighed round's best score inside the prior minus the best outside
 
     def __post_init__(self):
         self.state = None if self.prior is None else PENDING
+
+    @classmethod
+    def of(cls, prior: Prior | None, settings) -> "PriorWatch":
+        """The watch of a localizer with these settings (settings.loading.Settings)."""
+        return cls(prior, settings.prior, settings.tracking.confirm_rounds, settings.tracking.weight_gain)
 
     def bind(self, frame: int, plane_pose) -> None:
         """The first fused frame after the prior was given: the one it describes."""
@@ -284,7 +308,7 @@ class PriorWatch:
         gap = self.settings.contradiction_gap
         self.margin = best_in - best_out
         if judge:
-            self.against = self.against + 1 if best_out - best_in > gap else 0
+            self._count_against(rows[~inside][np.argmax(scores[~inside])] if best_out - best_in > gap else None)
             if self.against >= self.settings.contradiction_rounds:
                 self.state = CONTRADICTED
                 return Weighed(list(hypotheses), None, contradicted=True)
@@ -297,6 +321,35 @@ class PriorWatch:
                 for h, ok, lp in zip(hypotheses, inside, log_prior) if ok]
         head = max(0, self.confirm_rounds - self.settings.confirm_rounds) if best_in >= best_out else 0
         return Weighed(kept, [head] * len(kept))
+
+    def _count_against(self, leader_outside: np.ndarray | None) -> None:
+        """One judged round: leader_outside, the model row of the best place outside when
+        it leads the best inside by contradiction_gap (None: the round does not contradict).
+        Contradicting rounds count in a row only while they name one place (SAME_PLACE):
+        a handful of frames where the map lacks the place fits some place far off, a
+        different one each round; a prior that is wrong is beaten by the same place again."""
+        if leader_outside is None:
+            self.against, self.against_at = 0, None
+            return
+        place = self.bound.implied(leader_outside)[0][0]
+        same = self.against_at is not None and float(np.hypot(*(place - self.against_at))) <= SAME_PLACE
+        self.against, self.against_at = (self.against + 1 if same else 1), place
+
+    def stand_in(self, plane_pose, estimator) -> tuple[Sim2, np.ndarray, np.ndarray, float] | None:
+        """While a pose prior holds and no place the map explains is reported (before the
+        first round, or where the map lacks what the frames see): the prior's own pose,
+        carried by odometry, stands in, as AMCL reports its initial pose before its particles
+        converge. (alignment, pose, covariance, confidence) at the frame's plane pose, or
+        None. The confidence is the prior's own chance of lying within 1 m (a 2D Gaussian:
+        1 - exp(-1 / (2 sigma^2))), at most PRIOR_POSE_MAX_CONFIDENCE: nothing verified it.
+        estimator: EstimatorSettings (the odometry's scale, as the prior's seeds take it)."""
+        if self.state != ACTIVE or self.prior.pose is None:
+            return None
+        p = self.prior
+        alignment = self.bound.alignment(estimator.scale_prior if estimator.scale_mode != "fixed" else 1.0)
+        covariance = np.diag([p.sigma_xy**2, p.sigma_xy**2, p.sigma_theta**2])
+        confidence = min(PRIOR_POSE_MAX_CONFIDENCE, 1.0 - math.exp(-0.5 / p.sigma_xy**2))
+        return alignment, np.array(alignment.apply_pose(*plane_pose)), covariance, confidence
 
     @property
     def doubted(self) -> bool:

@@ -47,6 +47,7 @@ from .odometry_jump import JUMPED
 from ..prior import Prior, PriorWatch
 from .scheduler import RoundJob, RoundOutcome, RoundScheduler, ScheduledRound
 from ..tracking.filter_bank import HypothesisTracker
+from ..tracking import policy
 from ..tracking.status import Recovery, Rule
 
 
@@ -108,7 +109,7 @@ class Localizer:
         self._push_lock = threading.Lock()  # held by the running push: a second thread's push is refused
         self._closed = False
 
-        self._prior = self._watch(prior if prior is not None else Prior.from_settings(self.settings.prior))
+        self._prior = PriorWatch.of(prior if prior is not None else Prior.from_settings(self.settings.prior), self.settings)
         self._reset_at = 0  # rounds started before this frame were for a tracker set_prior replaced: dropped
 
     # ------------------------------------------------------------------------------
@@ -201,12 +202,9 @@ class Localizer:
         session log records the construction's prior only)."""
         if prior is not None and not isinstance(prior, Prior):
             raise ZflocError(f"set_prior: prior must be a zfloc_stream.prior.Prior or None, got {type(prior).__name__}")
-        self._prior = self._watch(prior)
+        self._prior = PriorWatch.of(prior, self.settings)
         self._restart()
         self._reset_at = self.frames_pushed
-
-    def _watch(self, prior: Prior | None) -> PriorWatch:
-        return PriorWatch(prior, self.settings.prior, self.settings.tracking.confirm_rounds, self.settings.tracking.weight_gain)
 
     def _restart(self, lost: bool = False) -> None:
         """Drop every hypothesis and what followed them (the preview, a kidnap test, the
@@ -424,16 +422,12 @@ class Localizer:
     def _estimate(self, index, timestamp, plane_pose, timings, skipped=None, round_skipped=None, suspect=False) -> Estimate:
         shown = self._preview if self._preview is not None and self.tracker.best is None else self.tracker
         best = shown.best
-        if best is None or plane_pose is None:
-            pose = cov = alignment = None
-            score = float("nan")
-        else:
+        pose = cov = alignment = None
+        score = float("nan") if best is None or plane_pose is None else float(best.score)
+        if best is not None and plane_pose is not None:
             alignment = self.local.alignment_of_mode(best)
-            pose = np.array(alignment.apply_pose(*plane_pose))
-            cov = shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
-            score = float(best.score)
-        # one decision (tracking/status.py): the frame's own evidence (its hits, the pose's step),
-        # a running kidnap test and a doubtful odometry step can each withhold `tracking`
+            pose, cov = np.array(alignment.apply_pose(*plane_pose)), shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
+        # one decision (tracking/status.py): the frame's evidence, a kidnap test, a doubtful step may withhold `tracking`
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
@@ -441,10 +435,16 @@ class Localizer:
             alignment, None if plane_pose is None else plane_pose[:2], consistent, explained,
             Recovery(kidnap_test=self.relocalization.test is not None, odometry_step=suspect), self._prior.doubted,
             None if shown is self.tracker else self.tracker.round_facts)
+        # no place the map explains, none tracked: the prior's own pose stands in (AMCL's initial pose)
+        unexplained = alignment is None or not policy.map_explains(explained, self.settings.tracking)
+        held = self._prior.stand_in(plane_pose, self.settings.estimator) \
+            if unexplained and plane_pose is not None and self.tracker.tracked_mode is None else None
+        if held is not None:
+            (alignment, pose, cov, confidence), score, self.last_rule = held, float("nan"), Rule.PRIOR_POSE
+            status, explained = Status.LOST if status is Status.LOST else Status.INITIALIZING, None  # no place to judge the map by
         self.map_match.note(explained, status)
         alternatives = () if plane_pose is None else shown.estimate_alternatives(plane_pose[:2], plane_pose[2])
-        if alternatives and pose is not None:  # the reported mode as reported: its locally refined pose
-            first = alternatives[0]
-            alternatives = (Alternative(alignment, pose, first.weight, first.score),) + alternatives[1:]
+        if alternatives and pose is not None and held is None:  # the reported mode as reported: its locally refined pose
+            alternatives = (Alternative(alignment, pose, alternatives[0].weight, alternatives[0].score),) + alternatives[1:]
         return Estimate(index, float(timestamp), status, pose, cov, alignment, score, alternatives, timings, skipped, round_skipped,
                         confidence, self._prior.state)

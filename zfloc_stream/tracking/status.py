@@ -29,6 +29,7 @@ round's status, a frame's rules only ever withhold `tracking` from one frame:
 | POSE_JUMP | lost | the reported pose moved beyond pose_jump_chi2 since the last frame |
 | MAP_UNEXPLAINED | ambiguous | the mode's weight times the map's fit to the latest BEV (policy.map_fit) is at most dominance_weight |
 | PRIOR_DOUBTED | ambiguous | the prior holds, but the frames favour a place outside it (prior.py) |
+| PRIOR_POSE | initializing (lost stays lost) | the prior's own pose is reported: no place the map explains (prior.PriorWatch.stand_in; set by the localizer) |
 | PREVIEW | the tracker's round status | a preview (one round on fewer frames) is reported: never a promise |
 
 The rules on the bank's numbers are tracking/policy.py's (one setting each, boundary-tested
@@ -68,6 +69,7 @@ class Rule(StrEnum):
     POSE_JUMP = policy.PolicyRule.POSE_JUMP
     MAP_UNEXPLAINED = policy.PolicyRule.MAP_UNEXPLAINED
     PRIOR_DOUBTED = "prior doubted"
+    PRIOR_POSE = "prior's own pose"
     PREVIEW = "preview"
 
 
