@@ -12,11 +12,25 @@ from zfloc_stream.stream.map_match import MIN_JUDGED_FRAMES, MapMatch
 from zfloc_stream.sim import SimSettings, build_scene, simulate
 
 
+def test_map_unexplained_boundary_is_weight_times_fit_at_dominance_weight():
+    """MAP_UNEXPLAINED: weight * map_fit(share) at most dominance_weight (0.9); with
+    min_explained_share 0.55 and confidence_share_band 0.15 the fit is (share - 0.4) / 0.3."""
+    s = TrackingSettings()
+    assert (s.min_explained_share, s.confidence_share_band, s.dominance_weight) == (0.55, 0.15, 0.9)
+    at = {1.0: 0.67, 0.95: 0.4 + 0.3 * 0.9 / 0.95}  # the share where weight * fit = 0.9
+    for weight, share in at.items():
+        assert policy.map_vouches(share + 1e-9, weight, s)
+        assert not policy.map_vouches(share - 1e-9, weight, s)
+    assert not policy.map_vouches(1.0, 0.9, s)  # a mode at dominance_weight is never enough
+    assert policy.map_vouches(None, 0.95, s)  # nothing to judge yet: the other rules decide
+    step = s.model_copy(update={"confidence_share_band": 0.0})  # the band off: the share alone, at min_explained_share
+    assert policy.map_vouches(0.55, 0.95, step) and not policy.map_vouches(float(np.nextafter(0.55, 0.0)), 0.95, step)
+
+
 def test_min_explained_share_boundary():
-    s = TrackingSettings().model_copy(update={"min_explained_share": 0.55})
-    assert policy.map_explains(0.55, s)
-    assert not policy.map_explains(float(np.nextafter(0.55, 0.0)), s)
-    assert policy.map_explains(None, s)  # nothing to judge yet: the other rules decide
+    s = TrackingSettings()
+    assert policy.map_explains(0.55, s) and not policy.map_explains(float(np.nextafter(0.55, 0.0)), s)
+    assert policy.map_explains(None, s)
 
 
 def test_verdict_only_for_a_run_that_never_tracked():
@@ -55,11 +69,14 @@ def test_wrong_map_never_tracks_and_is_said(office_frames):
     assert sum(e.pose is not None for e in estimates) >= MIN_JUDGED_FRAMES
     assert not any(e.status == "tracking" for e in estimates)
     assert verdict is not None and "does not match" in verdict
+    # no pose here is right, and the confidence says so (tracking/confidence.py: the map's fit)
+    assert max(e.confidence for e in estimates if e.pose is not None) < 0.1
 
 
 def test_right_map_tracks_without_a_verdict(office_frames):
     estimates, verdict = run("office", office_frames)
     assert estimates[-1].status == "tracking" and verdict is None
+    assert estimates[-1].confidence > 0.9
 
 
 @pytest.mark.slow

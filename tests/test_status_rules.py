@@ -156,11 +156,12 @@ def test_pose_jump_beyond_pose_jump_chi2():
     assert decide(TRACKED, held) == (TRACKING, Rule.TRACKING)
 
 
-def test_map_unexplained_below_min_explained_share():
-    below_share = FrameEvidence(consistent=True, map_explains=policy.map_explains(below(S.min_explained_share), S))
+def test_map_unexplained_where_weight_times_the_maps_fit_reaches_dominance_weight():
+    share = S.min_explained_share - S.confidence_share_band + 2 * S.confidence_share_band * S.dominance_weight  # weight 1: fit 0.9
+    below_share = FrameEvidence(consistent=True, map_explains=policy.map_vouches(share - 1e-9, 1.0, S))
     assert decide(TRACKED, below_share) == (AMBIGUOUS, Rule.MAP_UNEXPLAINED)
-    at_share = FrameEvidence(consistent=True, map_explains=policy.map_explains(S.min_explained_share, S))
-    assert decide(TRACKED, at_share) == (TRACKING, Rule.TRACKING)
+    above_share = FrameEvidence(consistent=True, map_explains=policy.map_vouches(share + 1e-9, 1.0, S))
+    assert decide(TRACKED, above_share) == (TRACKING, Rule.TRACKING)
     # a frame that contradicts the pose is lost, whatever the map explains
     assert decide(TRACKED, FrameEvidence(consistent=False, map_explains=False)).rule is Rule.FRAME_UNEXPLAINED
 

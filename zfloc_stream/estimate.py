@@ -73,9 +73,10 @@ class Estimate:
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage for this push
     skipped: str | None = None  # reason when the frame was rejected and not fused
     round_skipped: str | None = None  # why the round due at this frame did not run (None: ran, or none due)
-    # in [0, 1], for a caller to threshold: the reported mode's share of the tracker's weight,
-    # scaled by its confirmation, 0 when the frame's own evidence contradicts the pose
-    # (tracking.HypothesisTracker.judge_frame); nan before any pose
+    # in [0, 1], for a caller to threshold, the same on every map: the reported mode's share of
+    # the tracker's weight, times its confirmation, times how far the map explains what the
+    # sensor sees; 0 on a `lost` frame or when the frame's own evidence contradicts the pose
+    # (tracking/confidence.py); nan before any pose
     confidence: float = float("nan")
     # the caller's pose prior (prior.py): None without one; "pending" (given, no frame fused
     # since), "active" (it steers the search and the tracker), "released" (a mode inside it

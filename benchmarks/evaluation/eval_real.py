@@ -700,11 +700,8 @@ def main(argv=None) -> int:
     if args.wrong_map:
         from benchmarks.evaluation import wrong_map
 
-        runs = [(wrong_map.session_row, (s, m, args.seed, args.set)) for s in wrong_map.sessions() for m in wrong_map.sessions()
-                if s != m and args.camera] if args.camera else []
-        runs += [(wrong_map.laser_row, (j[0], j[1], j[2], other, args.seed, args.set, DATA)) for j in jobs if not j[6]
-                 for other in logs if other != j[0]]
-        rows = [fn(*a) for fn, a in runs]
+        runs = wrong_map.jobs([j[:3] for j in jobs if not j[6]], logs, args.camera, args.seed, args.set, DATA)
+        rows = _map(wrong_map.run, [(r,) for r in runs], args.workers)
         print(wrong_map.table(rows))
         print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
         if args.json:

@@ -67,11 +67,18 @@ class TrackingSettings(Section):
     # a frame whose reported pose at the sensor moved by more than this Mahalanobis^2 (mode
     # pose covariance + one measurement; chi2(3 dof) 13.28 is beyond 99.5%) is not `tracking`
     pose_jump_chi2: float = Field(13.28, gt=0, le=1e6)
-    # a frame is `tracking` only while the map explains the latest BEV: at least this share
-    # of its wall points within localizer.monitor_distance of a plan wall under the reported
-    # alignment (MAP_UNEXPLAINED). Shared camera sessions: on their own maps every frame
-    # >= 0.61; against another building's map the frames reported `tracking` explained 0.46
+    # the map's fit (policy.map_fit): a ramp in the share of the latest BEV's wall points
+    # within localizer.monitor_distance of a plan wall under the reported alignment, 1/2 at
+    # this share, 0 at this minus confidence_share_band, 1 at this plus it. Estimate.confidence
+    # is weight x confirmation x fit; a frame is `tracking` only while weight x fit exceeds
+    # dominance_weight (MAP_UNEXPLAINED; with weight 1: a share above 0.67). Shared camera
+    # sessions: on their own maps every frame >= 0.61; on other buildings' maps tracks started
+    # at 0.46 (before this rule), laser windows at 0.575-0.62. Band 0: a step at this share
     min_explained_share: float = Field(0.55, ge=0, le=1)
+    # 0.15: the narrowest band at which no laser frame on another building's map reached
+    # confidence 0.9 (the windows it was chosen on; on the others 10 of 26,400 frames did,
+    # look-alike corridors; camera windows and sessions, scenes: none)
+    confidence_share_band: float = Field(0.15, ge=0, le=1)
     confident_rounds: int = Field(5, ge=1, le=10_000)  # rounds of tracking one mode before confidently_tracking
     # odometry jump (policy.odometry_jumped): a step between two fused frames longer
     # than odometry_jump_min_step + odometry_jump_factor x the longest of the last

@@ -32,7 +32,8 @@ from filterpy.kalman import KalmanFilter
 
 from . import policy
 from .mode import Mode, anchored_state, implied_jacobian
-from .status import NO_RECOVERY, Decision, FrameEvidence, Recovery, RoundFacts, Rule, contradicts, decide, round_facts, vouches
+from .confidence import frame_confidence
+from .status import NO_RECOVERY, Decision, FrameEvidence, Recovery, RoundFacts, Rule, contradicts, decide, round_facts
 from ..settings.loading import TrackingSettings
 from ..errors import InputError
 from ..estimate import Alternative, Status
@@ -319,17 +320,18 @@ class HypothesisTracker:
         `tracking` (status.decide): its wall hits are not explained by the reported
         alignment (frame_consistent False, the localizer's monitor; an odometry spike or
         jump lands here), the pose jumped (pose_jumped), or the map explains too little
-        of the BEV (explained below min_explained_share: MAP_UNEXPLAINED); so can the
+        of the BEV for the mode's weight to count (MAP_UNEXPLAINED: weight times
+        policy.map_fit of explained at most dominance_weight); so can the
         recovery, a doubted prior and, when this bank is a preview, the tracker's own
         round (preview_of).
 
-        confidence in [0, 1], for a caller to threshold: the reported mode's share of the
-        bank's weight, scaled by how far it is confirmed (hits / rounds_to_track, at most
-        1), at most dominance_weight unless the decision vouches for the pose
-        (status.vouches), and 0 on a frame whose evidence contradicts it. nan before any
-        mode. explained: the share of the latest BEV's wall points the map explains under
-        the alignment (map_match.py); below min_explained_share the confidence is scaled
-        by explained / min_explained_share.
+        confidence in [0, 1], for a caller to threshold, the same on every map
+        (confidence.frame_confidence): the reported mode's share of the bank's weight,
+        times how far it is confirmed (hits / rounds_to_track, at most 1), times how far
+        the map explains the latest BEV (policy.map_fit of explained, the share of its
+        wall points the map explains under the alignment, map_match.py); at most
+        dominance_weight unless the decision vouches for the pose (status.vouches); 0 on a
+        `lost` frame or one whose evidence contradicts its pose. nan before any mode.
         """
         best = self.best
         previous, self._last_reported = self._last_reported, alignment
@@ -338,15 +340,11 @@ class HypothesisTracker:
             confidence = float("nan")
         else:
             frame = FrameEvidence(frame_consistent, self.pose_jumped(previous, alignment, sensor_xy, best),
-                                  policy.map_explains(explained, self.settings))
+                                  policy.map_vouches(explained, best.weight, self.settings))
             decision = decide(self._round, frame, recovery, prior_doubted, preview_of)
-            confirmation = min(1.0, best.hits / self.rounds_to_track())
-            confidence = 0.0 if contradicts(frame, recovery) else float(best.weight * confirmation)
-            if not frame.map_explains:
-                confidence *= explained / self.settings.min_explained_share
-        # never more than the status vouches for: above dominance_weight only while tracking
-        # (a mode the round did not single out can carry almost all of the weight and be wrong)
-        return decision, confidence if vouches(decision) else min(confidence, self.settings.dominance_weight)
+            confidence = frame_confidence(best.weight, best.hits / self.rounds_to_track(), explained, decision,
+                                          contradicts(frame, recovery), self.settings)
+        return decision, confidence
 
     def _mode_by_id(self, mode_id: int | None) -> Mode | None:
         return next((m for m in self.modes if m.id == mode_id), None)

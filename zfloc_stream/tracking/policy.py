@@ -22,7 +22,7 @@ softmax(weight_gain * running score) over the live modes.
 | TRACKED_KEEPS_ITS_PLACE | the tracked mode is reported unless an established rival outweighs it | rival_established_rounds |
 | NEWCOMER | untracked: a mode whose running score leads the heaviest confirmed one by newcomer_score_gap is reported | newcomer_score_gap |
 | POSE_JUMP | a frame whose reported pose moved beyond pose_jump_chi2 is not `tracking` | pose_jump_chi2 |
-| MAP_UNEXPLAINED | a frame whose latest BEV the map explains below min_explained_share is not `tracking` | min_explained_share |
+| MAP_UNEXPLAINED | a frame whose mode's weight times the map's fit (a ramp in the share of the latest BEV the map explains) is at most dominance_weight is not `tracking` | min_explained_share, confidence_share_band, dominance_weight |
 | ODOMETRY_JUMP | an odometry step far beyond the recent motion whose hits the BEV does not explain: map and modes restart, `lost` | odometry_jump_window, odometry_jump_min_step, odometry_jump_min_turn_deg, odometry_jump_factor |
 
 docs/status.md has the table rule -> function -> setting -> test.
@@ -200,15 +200,41 @@ def pose_jumped(mahalanobis2: float, s: TrackingSettings) -> bool:
     return mahalanobis2 > s.pose_jump_chi2
 
 
+def map_fit(explained: float | None, s: TrackingSettings) -> float:
+    """In [0, 1]: how far the map's explained share of the latest BEV (map_match.py) supports
+    the pose; a ramp of half-width confidence_share_band around min_explained_share (0 below
+    it, 1/2 at min_explained_share, 1 above it; 0: a step at min_explained_share). None
+    (nothing judged yet) does not lower it. Estimate.confidence's factor
+    (tracking/confidence.py) and MAP_UNEXPLAINED's."""
+    if explained is None:
+        return 1.0
+    band = s.confidence_share_band
+    if band <= 0:
+        return 1.0 if explained >= s.min_explained_share else 0.0
+    return min(1.0, max(0.0, (explained - s.min_explained_share + band) / (2.0 * band)))
+
+
 def map_explains(share: float | None, s: TrackingSettings) -> bool:
-    """MAP_UNEXPLAINED when False: under the reported alignment less than
-    min_explained_share of the latest BEV's wall points lie near a plan wall. The one rule
-    that compares with a level, not a gap: a gap says which place is best, not whether any
-    place in this map is right (on another building's map the best place can hold almost
-    all of the weight while its map explains under half of what the sensor saw; the
-    numbers are in docs/measurements/status.md). None (no BEV to judge yet) does not
-    withhold `tracking`."""
+    """Does the map explain the latest BEV at all: at least min_explained_share of its wall
+    points lie near a plan wall under the reported alignment (None: nothing to judge yet).
+    Where the fit is a yes or no (the prior's own pose stands in below it); the status rule
+    weighs the fit with the mode's weight (map_vouches)."""
     return share is None or share >= s.min_explained_share
+
+
+def map_vouches(share: float | None, weight: float, s: TrackingSettings) -> bool:
+    """MAP_UNEXPLAINED when False: the map's fit (map_fit of the share of the latest BEV's
+    wall points near a plan wall under the reported alignment) leaves the reported mode's
+    weight at or below dominance_weight: weight * map_fit <= dominance_weight. So a frame is
+    `tracking` only while its confidence (tracking/confidence.py) exceeds dominance_weight,
+    on every map: with weight 1 the share must exceed min_explained_share +
+    confidence_share_band * 0.8 (0.67 by default); with confidence_share_band 0 it must
+    reach min_explained_share (map_explains). The one rule that compares with a level, not
+    a gap: a gap says which place is best, not whether any place in this map is right (on
+    another building's map the best place can hold all of the weight while its map explains
+    0.575-0.62 of what the sensor saw; docs/measurements/status.md). None (no BEV to judge
+    yet) does not withhold `tracking`."""
+    return share is None or weight * map_fit(share, s) > s.dominance_weight
 
 
 def odometry_jumped(step: float, turn: float, recent_step: float, recent_turn: float, bev_explains: bool,

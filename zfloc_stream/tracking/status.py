@@ -28,7 +28,7 @@ round's status, a frame's rules only ever withhold `tracking` from one frame:
 | FRAME_UNEXPLAINED | lost | the monitor finds the frame's wall hits unexplained by the pose (monitor.py) |
 | POSE_JUMP | lost | the reported pose moved beyond pose_jump_chi2 since the last frame |
 | AUDIT_DOUBT | ambiguous | the latest audit scored the reported place below audit_doubt_share of its usual audit score and another place at least as high, or a kidnap test on it ended without adopting another place, and no audit has cleared it since (stream/audit.py) |
-| MAP_UNEXPLAINED | ambiguous | the map explains less than min_explained_share of the latest BEV |
+| MAP_UNEXPLAINED | ambiguous | the mode's weight times the map's fit to the latest BEV (policy.map_fit) is at most dominance_weight |
 | PRIOR_DOUBTED | ambiguous | the prior holds, but the frames favour a place outside it (prior.py) |
 | PRIOR_POSE | initializing (lost stays lost) | the prior's own pose is reported: no place the map explains (prior.PriorWatch.stand_in; set by the localizer) |
 | PREVIEW | the tracker's round status | a preview (one round on fewer frames) is reported: never a promise |
@@ -108,7 +108,7 @@ class FrameEvidence:
 
     consistent: bool | None = None  # monitor.frame_consistent on its wall hits (None: too few to judge)
     pose_jumped: bool = False  # policy.pose_jumped on the reported pose's step
-    map_explains: bool = True  # policy.map_explains on the latest BEV
+    map_explains: bool = True  # policy.map_vouches on the latest BEV and the mode's weight
 
 
 @dataclass(frozen=True)
