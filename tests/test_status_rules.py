@@ -133,6 +133,16 @@ def test_the_kidnap_test_comes_before_a_doubtful_odometry_step():
     assert decide(TRACKED, FRAME, Recovery(True, True)).rule is Rule.KIDNAP_TEST
 
 
+def test_the_audits_doubt_makes_a_frame_ambiguous_after_the_frames_own_evidence():
+    doubt = Recovery(audit_doubt=True)
+    assert decide(TRACKED, FRAME, doubt) == (AMBIGUOUS, Rule.AUDIT_DOUBT)
+    assert decide(TRACKED, None, doubt) == (TRACKING, Rule.TRACKING)  # no pose: nothing to doubt
+    assert decide(AMBIGUOUS_ROUND, FRAME, doubt) == (AMBIGUOUS, Rule.AMBIGUITY)  # never upgrades
+    assert decide(TRACKED, FrameEvidence(consistent=False), doubt).rule is Rule.FRAME_UNEXPLAINED
+    assert decide(TRACKED, FrameEvidence(consistent=True, map_explains=False), doubt).rule is Rule.AUDIT_DOUBT
+    assert not status.contradicts(FRAME, doubt)  # the pose may be right: confidence at most dominance_weight
+
+
 def test_frame_unexplained():
     assert decide(TRACKED, FrameEvidence(consistent=False)) == (LOST, Rule.FRAME_UNEXPLAINED)
     assert decide(TRACKED, FrameEvidence(consistent=None)) == (TRACKING, Rule.TRACKING)  # too few hits: no verdict

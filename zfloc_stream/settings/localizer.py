@@ -55,6 +55,13 @@ class LocalizerSettings(Section):
     audit_frames: int = Field(10, ge=0, le=10_000)
     audit_margin: float = Field(0.05, ge=0, le=10)
     audit_min_violation: float = Field(0.05, ge=0, le=1)
+    # the audit's doubt: an audit whose round scores the tracked place below
+    # audit_doubt_share of its usual audit score (the median of its earlier audits), and
+    # another place at least as high, says the recent frames fit elsewhere as well; the
+    # place is not `tracking` until an audit no longer finds so (also after a kidnap test
+    # on it ended without adopting another place). Carried along the built-in offices, the
+    # old place's audits fell to 0.59-0.80 of usual while it was still `tracking`. 0: off
+    audit_doubt_share: float = Field(0.8, ge=0, le=1)
     # local refinement: odometry drifts, so a BEV of many frames is a smeared picture and the
     # alignment that fits all of it can sit off where the sensor is now. After each round
     # (and every local_every_k_frames frames) the tracked mode's alignment is refined (LM,

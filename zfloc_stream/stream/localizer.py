@@ -163,7 +163,7 @@ class Localizer:
         if self.monitor.wants_global_search(None if tracked is None else tracked.id,
                                             None if tracked is None else self.local.alignment_of_mode(tracked),
                                             self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], tracked)):
-            if not self.relocalization.alarm(self.bev.stamp, self.recent.contradiction):
+            if not self.relocalization.alarm(self.bev.stamp, self.recent.contradiction, tracked.id):
                 self.rounds.request_global_search()
 
     def _restart_after_jump(self, frame, index: int) -> np.ndarray:
@@ -207,15 +207,15 @@ class Localizer:
         self._reset_at = self.frames_pushed
 
     def _restart(self, lost: bool = False) -> None:
-        """Drop every hypothesis and what followed them (the preview, a kidnap test, the
-        monitor, the local refinement): a new prior, one the frames contradicted, or (lost)
-        an odometry jump, after which the tracker reports `lost` and a new mode needs
-        confirm_rounds_after_loss hits (HypothesisTracker.declare_lost)."""
+        """Drop every hypothesis and what followed them (the preview, a kidnap test, the audit's doubt, the
+        monitor, the local refinement): a new prior, one the frames contradicted, or (lost) an odometry jump,
+        after which the tracker reports `lost` and a new mode needs confirm_rounds_after_loss hits."""
         if lost:
             self.tracker.declare_lost()
         else:
             self.tracker = HypothesisTracker(self.settings.tracking)
-        self._preview, self.relocalization.test = None, None
+        self._preview = None
+        self.relocalization.reset()
         self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
         self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
 
@@ -427,14 +427,14 @@ class Localizer:
         if best is not None and plane_pose is not None:
             alignment = self.local.alignment_of_mode(best)
             pose, cov = np.array(alignment.apply_pose(*plane_pose)), shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
-        # one decision (tracking/status.py): the frame's evidence, a kidnap test, a doubtful step may withhold `tracking`
+        # one decision (tracking/status.py): the frame's evidence, a kidnap test, a doubtful step, the audit's doubt may withhold it
         consistent = None if alignment is None else self.monitor.frame_consistent(
             alignment, self.local.frame_hits(self.bev.last_wall_hits, plane_pose[:2], best), best.id)
         explained = self.map_match.share(alignment, self.last_observation)  # does the map explain the BEV at all?
         (status, self.last_rule), confidence = shown.judge_frame(
             alignment, None if plane_pose is None else plane_pose[:2], consistent, explained,
-            Recovery(kidnap_test=self.relocalization.test is not None, odometry_step=suspect), self._prior.doubted,
-            None if shown is self.tracker else self.tracker.round_facts)
+            Recovery(self.relocalization.test is not None, suspect, shown is self.tracker and self.relocalization.doubts(best)),
+            self._prior.doubted, None if shown is self.tracker else self.tracker.round_facts)
         # no place the map explains, none tracked: the prior's own pose stands in (AMCL's initial pose)
         unexplained = alignment is None or not policy.map_explains(explained, self.settings.tracking)
         held = self._prior.stand_in(plane_pose, self.settings.estimator) \

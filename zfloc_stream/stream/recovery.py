@@ -56,10 +56,11 @@ class KidnapTest:
     rounds_left: int
     contradiction: float  # the most any recent frame contradicted the BEV when the test started
     audit: bool = False  # started by an audit (outscored), not by the monitor: adopted when outscored too
+    old_id: int | None = None  # the tracked mode whose place it tests
 
     @classmethod
     def start(cls, bev_stamp: int, settings: Settings, contradiction: float, since: int | None = None,
-              audit: bool = False) -> "KidnapTest":
+              audit: bool = False, old_id: int | None = None) -> "KidnapTest":
         """The test of a run of monitor_frames inconsistent frames ending at bev_stamp (or,
         since given, of the frames from that BEV stamp on: an audit's); contradiction: the
         most a frame of the last localizer.local_frames contradicted what older frames saw
@@ -67,7 +68,7 @@ class KidnapTest:
         bank = HypothesisTracker(settings.tracking)
         bank.declare_lost()  # a new place after a loss needs confirm_rounds_after_loss hits
         since = bev_stamp - settings.localizer.monitor_frames + 1 if since is None else since
-        return cls(since, bank, settings.tracking.confirm_rounds_after_loss + 1, contradiction, audit)
+        return cls(since, bank, settings.tracking.confirm_rounds_after_loss + 1, contradiction, audit, old_id)
 
     def job(self, index: int, old: Mode | None) -> RoundJob:
         """The test's round started at frame index: a global search on what the BEV saw since
@@ -130,6 +131,12 @@ class Places:
     def best_at(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
         """best_at among the round's hypotheses."""
         return best_at(outcome.result.hypotheses, place, mode, self.tracker, sensor_xy)
+
+    def best_elsewhere(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
+        """The best-scored hypothesis the round kept beyond the tracker's pose-jump gate of
+        `place` (under mode's covariance); None when it kept none elsewhere."""
+        far = [h for h in outcome.result.hypotheses if self.tracker.pose_jumped(place, h.alignment, sensor_xy, mode)]
+        return max(far, key=lambda h: h.score, default=None)
 
 
 def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,

@@ -27,6 +27,7 @@ round's status, a frame's rules only ever withhold `tracking` from one frame:
 | ODOMETRY_STEP | lost | the frame's odometry step is one the sensor cannot have made (odometry_jump.py) |
 | FRAME_UNEXPLAINED | lost | the monitor finds the frame's wall hits unexplained by the pose (monitor.py) |
 | POSE_JUMP | lost | the reported pose moved beyond pose_jump_chi2 since the last frame |
+| AUDIT_DOUBT | ambiguous | the latest audit scored the reported place below audit_doubt_share of its usual audit score and another place at least as high, or a kidnap test on it ended without adopting another place, and no audit has cleared it since (stream/audit.py) |
 | MAP_UNEXPLAINED | ambiguous | the mode's weight times the map's fit to the latest BEV (policy.map_fit) is at most dominance_weight |
 | PRIOR_DOUBTED | ambiguous | the prior holds, but the frames favour a place outside it (prior.py) |
 | PRIOR_POSE | initializing (lost stays lost) | the prior's own pose is reported: no place the map explains (prior.PriorWatch.stand_in; set by the localizer) |
@@ -67,6 +68,7 @@ class Rule(StrEnum):
     ODOMETRY_STEP = "odometry step in doubt"
     FRAME_UNEXPLAINED = "frame unexplained"
     POSE_JUMP = policy.PolicyRule.POSE_JUMP
+    AUDIT_DOUBT = "audit doubts the place"
     MAP_UNEXPLAINED = policy.PolicyRule.MAP_UNEXPLAINED
     PRIOR_DOUBTED = "prior doubted"
     PRIOR_POSE = "prior's own pose"
@@ -115,6 +117,7 @@ class Recovery:
 
     kidnap_test: bool = False  # a kidnap test runs (recovery.KidnapTest)
     odometry_step: bool = False  # the odometry-jump watch doubts the frame's step (odometry_jump.py)
+    audit_doubt: bool = False  # the audit doubts the reported place (stream/audit.py)
 
 
 NO_RECOVERY = Recovery()
@@ -157,6 +160,8 @@ def decide(round: RoundFacts, frame: FrameEvidence | None = None, recovery: Reco
             return Decision(Status.LOST, Rule.FRAME_UNEXPLAINED)
         if frame.pose_jumped:
             return Decision(Status.LOST, Rule.POSE_JUMP)
+        if recovery.audit_doubt:
+            return Decision(Status.AMBIGUOUS, Rule.AUDIT_DOUBT)
         if not frame.map_explains:
             return Decision(Status.AMBIGUOUS, Rule.MAP_UNEXPLAINED)
     if prior_doubted:
