@@ -1,6 +1,8 @@
 """Estimate.confidence (tracking/confidence.py, issue 43): the map's fit at its boundaries
 (tracking.confidence_share_band around tracking.min_explained_share), 0 on `lost` and
-contradicted frames, at most dominance_weight unless the status vouches for the pose."""
+contradicted frames, strictly below dominance_weight unless the status vouches for the pose."""
+
+import math
 
 import numpy as np
 import pytest
@@ -44,7 +46,7 @@ def test_a_lost_or_contradicted_frame_has_no_confidence():
 
 
 def test_confidence_above_dominance_weight_only_when_the_status_vouches():
-    cap = S.dominance_weight
+    cap = math.nextafter(S.dominance_weight, 0.0)  # strictly below: ">= dominance_weight" takes only vouched frames
     assert frame_confidence(1.0, 1.0, 1.0, Decision(Status.AMBIGUOUS, Rule.AMBIGUITY), False, S) == cap
     assert frame_confidence(1.0, 1.0, 1.0, Decision(Status.INITIALIZING, Rule.THIN_EVIDENCE), False, S) == cap
     assert frame_confidence(1.0, 1.0, 1.0, Decision(Status.INITIALIZING, Rule.PREVIEW), False, S) == 1.0

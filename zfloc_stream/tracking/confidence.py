@@ -21,7 +21,7 @@ and then, from the status decision:
   unexplained, a pose jump, a running kidnap test, a doubted odometry step), and on a `lost`
   frame: the mode it tracked stopped explaining the data (or was dropped), and whatever is
   reported now has not earned any trust;
-- at most dominance_weight unless the decision vouches for the pose (status.vouches:
+- below dominance_weight (strictly) unless the decision vouches for the pose (status.vouches:
   `tracking`, or a preview of a bank that would be): a mode the round did not single out
   can carry almost all of the weight and be wrong. The other way round, a `tracking` frame
   whose weight times map_fit is at most dominance_weight is not `tracking`
@@ -44,6 +44,8 @@ on their own and on another scene's map (none): docs/measurements/status.md.
 
 from __future__ import annotations
 
+import math
+
 from .policy import map_fit
 from .status import Decision, vouches
 from ..estimate import Status
@@ -58,4 +60,6 @@ def frame_confidence(weight: float, confirmation: float, explained: float | None
     if contradicted or decision.status is Status.LOST:
         return 0.0
     confidence = float(weight * min(1.0, confirmation) * map_fit(explained, s))
-    return confidence if vouches(decision) else min(confidence, s.dominance_weight)
+    # a frame the status does not vouch for stays strictly below dominance_weight, so a caller's
+    # `confidence >= dominance_weight` takes only frames that are `tracking` (or a preview's)
+    return confidence if vouches(decision) else min(confidence, math.nextafter(s.dominance_weight, 0.0))
