@@ -329,7 +329,7 @@ class HypothesisTracker:
         (confidence.frame_confidence): the reported mode's share of the bank's weight,
         times how far it is confirmed (hits / rounds_to_track, at most 1), times how far
         the map explains the latest BEV (policy.map_fit of explained, the share of its
-        wall points the map explains under the alignment, map_match.py); at most
+        wall points the map explains under the alignment, map_match.py); strictly below
         dominance_weight unless the decision vouches for the pose (status.vouches); 0 on a
         `lost` frame or one whose evidence contradicts its pose. nan before any mode.
         """
