@@ -1,5 +1,6 @@
 """Synthetic hypothesis streams through the filter bank (no other stage needed)."""
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -494,5 +495,5 @@ def test_confidence_above_dominance_weight_only_on_tracking_frames():
     assert tracker.status == "tracking" and tracker.best.weight == pytest.approx(1.0)
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("tracking", pytest.approx(1.0))
     tracker._round = replace(tracker._round, confirmation=policy.PolicyRule.AMBIGUITY)  # the same mode, not vouched for by the status
-    cap = tracker.settings.dominance_weight
+    cap = math.nextafter(tracker.settings.dominance_weight, 0.0)  # strictly below: ">= dominance_weight" is tracking only
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", cap)
