@@ -24,7 +24,8 @@ def places(score, elsewhere):
     pose-jump gate `elsewhere` (None: it kept none)."""
     here, there = (None if v is None else SimpleNamespace(score=v) for v in (score, elsewhere))
     return SimpleNamespace(outscored=lambda *a, **k: False, best_at=lambda *a, **k: here,
-                           best_elsewhere=lambda *a, **k: there, local=SimpleNamespace(alignment_of_mode=lambda mode: Sim2()))
+                           best_here_and_elsewhere=lambda *a, **k: (here, there),
+                           local=SimpleNamespace(alignment_of_mode=lambda mode: Sim2()))
 
 
 def audit_of(scores, elsewhere=None, **settings) -> Audit:

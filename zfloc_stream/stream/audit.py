@@ -73,7 +73,7 @@ class Audit:
         if places.outscored(outcome, old, sensor_xy):
             return True
         place = places.local.alignment_of_mode(old)
-        here, there = places.best_at(outcome, place, old, sensor_xy), places.best_elsewhere(outcome, place, old, sensor_xy)
+        here, there = places.best_here_and_elsewhere(outcome, place, old, sensor_xy)
         self._doubted = old.id if self.falls_short(None if here is None else here.score,
                                                    None if there is None else there.score) else None
         if here is not None:

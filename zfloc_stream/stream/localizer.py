@@ -423,9 +423,9 @@ class Localizer:
         shown = self._preview if self._preview is not None and self.tracker.best is None else self.tracker
         best = shown.best
         pose = cov = alignment = None
-        score = float("nan") if best is None or plane_pose is None else float(best.score)
+        score = float("nan")
         if best is not None and plane_pose is not None:
-            alignment = self.local.alignment_of_mode(best)
+            alignment, score = self.local.alignment_of_mode(best), float(best.score)
             pose, cov = np.array(alignment.apply_pose(*plane_pose)), shown.pose_covariance(plane_pose[:2], plane_pose[2], mode=best)
         # one decision (tracking/status.py): the frame's evidence, a kidnap test, a doubtful step, the audit's doubt may withhold it
         consistent = None if alignment is None else self.monitor.frame_consistent(

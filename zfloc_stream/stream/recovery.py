@@ -132,11 +132,10 @@ class Places:
         """best_at among the round's hypotheses."""
         return best_at(outcome.result.hypotheses, place, mode, self.tracker, sensor_xy)
 
-    def best_elsewhere(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
-        """The best-scored hypothesis the round kept beyond the tracker's pose-jump gate of
-        `place` (under mode's covariance); None when it kept none elsewhere."""
-        far = [h for h in outcome.result.hypotheses if self.tracker.pose_jumped(place, h.alignment, sensor_xy, mode)]
-        return max(far, key=lambda h: h.score, default=None)
+    def best_here_and_elsewhere(self, outcome: RoundOutcome, place: Sim2, mode: Mode, sensor_xy):
+        """(best_at, the best-scored hypothesis beyond the pose-jump gate of `place`) among
+        the round's hypotheses, in one pass; None where it kept none."""
+        return best_near_and_far(outcome.result.hypotheses, place, mode, self.tracker, sensor_xy)
 
 
 def better_place(found: Sim2, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, monitor: ConsistencyMonitor,
@@ -163,8 +162,16 @@ def best_at(hypotheses, place: Sim2, mode: Mode, tracker: HypothesisTracker, sen
     """The best-scored hypothesis a round kept at `place` (within the tracker's pose-jump
     gate of it, under mode's covariance); None when it kept none there (then the place
     scored below every hypothesis the round kept)."""
-    near = [h for h in hypotheses if not tracker.pose_jumped(place, h.alignment, sensor_xy, mode)]
-    return max(near, key=lambda h: h.score, default=None)
+    return best_near_and_far(hypotheses, place, mode, tracker, sensor_xy)[0]
+
+
+def best_near_and_far(hypotheses, place: Sim2, mode: Mode, tracker: HypothesisTracker, sensor_xy):
+    """The best-scored hypotheses within and beyond the tracker's pose-jump gate of `place`
+    (under mode's covariance), each None when the round kept none there."""
+    near, far = [], []
+    for h in hypotheses:
+        (far if tracker.pose_jumped(place, h.alignment, sensor_xy, mode) else near).append(h)
+    return max(near, key=lambda h: h.score, default=None), max(far, key=lambda h: h.score, default=None)
 
 
 def outscored(hypotheses, old: Sim2, old_mode: Mode, tracker: HypothesisTracker, sensor_xy, gap: float,
