@@ -92,9 +92,8 @@ class Localizer:
         self.last_observation = None  # BevObservation of the latest round, for overlays
         self.last_round: RoundOutcome | None = None  # the latest applied round, with its stage timings
         self.rounds = RoundScheduler(floorplan, self.settings)
-        self.monitor = ConsistencyMonitor(floorplan, self.settings.localizer)
+        self.monitor, self.local = self._place_checks()
         self.map_match = MapMatch(floorplan, self.settings.localizer, self.settings.tracking)
-        self.local = LocalRefinement(floorplan, self.settings.localizer, self.settings.estimator)
         if self.settings.localizer.odometry_scale == "metric" and not self.local.metric_odometry:
             # measured: monocular camera windows at a free scale 60% against 92% at the prior
             warnings.warn(f"localizer.odometry_scale 'metric' applies at estimator.scale_mode 'prior' only: at "
@@ -134,9 +133,7 @@ class Localizer:
             self._push_lock.release()
 
     def _push(self, frame: CameraFrame | LaserFrame) -> Estimate:
-        """One frame, top to bottom: fuse it (its odometry step judged), note it and watch it
-        against the tracked place, apply the rounds that land here, start the rounds due,
-        decide its status and report."""
+        """One frame, top to bottom (the module docstring's steps 1-5)."""
         index = self.frames_pushed
         self.frames_pushed += 1
         timings: dict[str, float] = {}
@@ -167,15 +164,14 @@ class Localizer:
                 self.rounds.request_global_search()
 
     def _restart_after_jump(self, frame, index: int) -> np.ndarray:
-        """The odometry jumped (policy.PolicyRule.ODOMETRY_JUMP): the map and every
-        alignment belong to the odometry frame before the jump. The BEV starts again from
-        this frame, the tracker is lost with no mode (a new one needs
-        confirm_rounds_after_loss hits), rounds started before are dropped, an active prior
-        is released (it was bound in the cleared map); gravity stays.
-        Returns the frame's plane pose in the restarted map."""
+        """The odometry jumped (policy.PolicyRule.ODOMETRY_JUMP): the map and every alignment
+        belong to the odometry frame before it. The BEV starts again from this frame, the
+        tracker is lost with no mode (a new one needs confirm_rounds_after_loss hits), rounds
+        started before are dropped, an active prior is released; gravity stays. Returns the
+        frame's plane pose in the restarted map."""
         plane_pose = self.fusion.restart(frame)
         self._restart(lost=True)
-        self._prior.release()  # it was bound in the cleared map
+        self._prior.release()
         self.recent.clear()
         self._jumped_at = index
         self.odometry_jumps += 1
@@ -216,8 +212,12 @@ class Localizer:
             self.tracker = HypothesisTracker(self.settings.tracking)
         self._preview = None
         self.relocalization.reset()
-        self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
-        self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
+        self.monitor, self.local = self._place_checks()
+
+    def _place_checks(self) -> tuple[ConsistencyMonitor, LocalRefinement]:
+        """A new monitor and local refinement: what follows the tracked place, from scratch."""
+        return (ConsistencyMonitor(self.floorplan, self.settings.localizer),
+                LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator))
 
     @property
     def prior(self) -> str | None:
@@ -287,18 +287,16 @@ class Localizer:
         return self._apply_landed(index, timings)
 
     def _tracking_job(self, index: int) -> RoundJob:
-        """The tracker's round: on the whole BEV, warm-started from the live modes; a
-        confidently tracked mode narrows the search unless a global one is asked for or a
-        prior is active (each round checks it against the best place elsewhere)."""
+        """The tracker's round: on the whole BEV, warm-started from the live modes; narrowed to a confidently
+        tracked mode unless a global search is asked for or a prior is active (checked against elsewhere)."""
         prior = self._prior.for_round
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted and prior is None
         return RoundJob(index, None, self.tracker.warm_start(), tracked, prior=prior)
 
     def _start_round(self, mode: str, job: RoundJob, plane_pose: np.ndarray, timings: dict) -> None:
         """Start the round `job` describes on what the BEV holds now (since job.since), where
-        `mode` says. A round leaving this thread gets a copy of the grid, which changes under
-        it while the stream goes on (round_start: the time to hand it over). A BEV with too
-        little evidence skips the round when it is applied: the status stays as it is."""
+        `mode` says; one leaving this thread gets a copy of the grid, which changes under it
+        (round_start: the time to hand it over). A BEV too thin to trust skips the round."""
         t0 = time.perf_counter()
         copy = self.rounds.on_worker(mode)
         try:
@@ -314,9 +312,8 @@ class Localizer:
         return Places(self.tracker, self.monitor, self.local, self.recent, self.settings.localizer)
 
     def _audit_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
-        """An audit's round landed: if it scores another place audit_margin above the
-        tracked one on the recent frames (audit.py), a kidnap test starts on the
-        audited frames, this round its first."""
+        """An audit's round landed: if it scores another place audit_margin above the tracked
+        one on the recent frames (audit.py), a kidnap test starts on them, this round its first."""
         old = self.tracker.tracked_mode
         if self.relocalization.test is not None or old is None:
             return None  # a test already runs, or nothing is tracked any more: nothing to audit
@@ -370,12 +367,13 @@ class Localizer:
         if self.tracker.best is not None:
             self._preview = None  # the tracker's own pose from now on
         self._refine_locally(timings, outcome)
+        self._kidnap_found(self.relocalization.left_behind(self.tracker, scheduled), timings, outcome)
         return None
 
     def _show_preview(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
-        """A preview round landed (scheduler.py): what a copy of the tracker makes of
-        it is reported while the tracker itself has no pose. The tracker never sees it: the
-        round of this frame, on all of its frames, updates the tracker when it lands."""
+        """A preview round landed (scheduler.py): what a copy of the tracker makes of it is
+        reported while the tracker has no pose; the round of this frame, on all its frames,
+        updates the tracker itself when it lands."""
         if outcome.result is None:
             self._preview = None  # each preview replaces the last, one that found nothing too
             return outcome.skipped
@@ -389,8 +387,7 @@ class Localizer:
 
     # ------------------------------------------------------------------------------
     def _kidnap_round(self, scheduled: ScheduledRound, outcome: RoundOutcome, timings: dict) -> str | None:
-        """A kidnap test's round landed: adopt its bank (the BEV forgets what only older
-        frames saw), go on, or end the test. Returns why the round did not count."""
+        """A kidnap test's round landed: adopt its bank, go on, or end the test (why the round did not count)."""
         test = self.relocalization.test
         verdict = self.relocalization.feed(scheduled, outcome, self.tracker.best, self._places())
         if verdict is None:
@@ -399,16 +396,19 @@ class Localizer:
             self.last_observation, self.last_result = outcome.observation, outcome.result
         if verdict is Verdict.CARRIED_OFF:
             self.tracker = test.tracker
-            self.bev.forget_before(test.since)
-            self.monitor = ConsistencyMonitor(self.floorplan, self.settings.localizer)
-            self.local = LocalRefinement(self.floorplan, self.settings.localizer, self.settings.estimator)
-            self._refine_locally(timings, outcome)
+            self._kidnap_found(test.since, timings, outcome)
             return None
-        if verdict is Verdict.NOT_CARRIED_OFF:
-            # the test's global searches found no better place: the frames saw what the map
-            # lacks, and the tracker, which went on meanwhile, keeps its modes
+        if verdict is Verdict.NOT_CARRIED_OFF:  # no better place: the tracker keeps its modes, unless they left it
+            self._kidnap_found(self.relocalization.left_behind(self.tracker, scheduled), timings, outcome)
             return "kidnap test ended: no other place earned tracking"
         return outcome.skipped
+
+    def _kidnap_found(self, since: int | None, timings: dict, outcome: RoundOutcome) -> None:
+        """A kidnap found (since: a BEV stamp; None: none): the BEV forgets what frames before it saw."""
+        if since is not None:
+            self.bev.forget_before(since)
+            self.monitor, self.local = self._place_checks()
+            self._refine_locally(timings, outcome)
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()

@@ -57,6 +57,7 @@ class KidnapTest:
     contradiction: float  # the most any recent frame contradicted the BEV when the test started
     audit: bool = False  # started by an audit (outscored), not by the monitor: adopted when outscored too
     old_id: int | None = None  # the tracked mode whose place it tests
+    old_alignment: Sim2 | None = None  # that place, as the tracker last held it (Relocalization.feed)
 
     @classmethod
     def start(cls, bev_stamp: int, settings: Settings, contradiction: float, since: int | None = None,
