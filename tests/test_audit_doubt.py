@@ -109,7 +109,8 @@ def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
 
 def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_its_place():
     """Relocalization.left_behind: after a test on OLD ended without adopting, a round whose
-    reported mode is another one beyond OLD's pose-jump gate finds the kidnap (returns the
+    reported mode is another one beyond OLD's pose-jump gate, holding at least
+    JOIN_MIN_WEIGHT, finds the kidnap (returns the
     test's since; counted, later rounds dropped); OLD itself, or a mode within the gate, does
     not; nor any mode once confirm_rounds_after_loss + 1 rounds have passed."""
     scheduled = ScheduledRound(RoundJob(25, None, [], False), 30, np.zeros(3), 0)
@@ -127,6 +128,8 @@ def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_
     reloc, since = after(moved, jumped=True)
     assert since == 17 and reloc.found == 1 and reloc.adopted_at == 25 and reloc.ended is None
     assert after(moved, jumped=False)[1] is None  # the same place
+    light = SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=np.nextafter(JOIN_MIN_WEIGHT, 0.0))
+    assert after(light, jumped=True)[1] is None  # the tracker does not lean there (JOIN_MIN_WEIGHT)
     assert after(OLD, jumped=True)[1] is None  # still the tested mode
     assert after(None, jumped=True)[1] is None
     last = Settings().tracking.confirm_rounds_after_loss
