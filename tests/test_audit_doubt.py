@@ -202,7 +202,7 @@ def test_carried_off_where_the_tracker_moves_before_the_test_adopts_both_kidnaps
     """Camera seed 4 (20.0 and 19.7 m): the first test's bank tracked the true place 0.6 m and
     6.5 deg from the mode the tracker's own rounds had moved to (beyond the gate: not joined),
     and the tracker stayed `lost` there for 25 frames with the old place's frames in its BEV,
-    then never `tracking` again. With left_behind and RIVAL_COLLAPSED each kidnap is
+    then never `tracking` again. With left_behind each kidnap is
     `tracking` within 1 m again within 30 frames of its cut."""
     statuses, _, errors, at = _offices_walk(seed=4)
     for cut in at:

@@ -240,8 +240,9 @@ class HypothesisTracker:
         s = self.settings
         self._normalise()
         by_weight = sorted(self.modes, key=lambda m: (-tie_key(m.weight), m.id))
-        self.modes = sorted([m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight
-                             and not policy.rival_collapsed(m, self._tracked_id, s)], key=lambda m: m.id)
+        self.modes = sorted(
+            [m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight], key=lambda m: m.id
+        )
         self._normalise()
 
     def _normalise(self) -> None:

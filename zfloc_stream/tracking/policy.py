@@ -16,7 +16,6 @@ softmax(weight_gain * running score) over the live modes.
 | UNSEEN_COLLAPSES | nothing matched the mode while the round found something: a collapse | - |
 | COLLAPSED | lost_rounds collapses in a row: the tracked mode is lost | lost_rounds |
 | PRUNED | the tracked mode left the bank (pruned, merged away): lost | prune_weight, max_modes |
-| RIVAL_COLLAPSED | a mode other than the tracked one that collapsed lost_rounds rounds in a row leaves the bank | lost_rounds |
 | OVERTAKEN | an established rival is reported instead of the tracked mode: lost | rival_established_rounds |
 | AMBIGUITY | another confirmed mode holds >= ambiguity_ratio of the leader's weight | ambiguity_ratio |
 | THIN_EVIDENCE | the leader holds <= dominance_weight of the weight, or (not yet tracked) the round did not single it out | dominance_weight, confirm_score_gap |
@@ -53,7 +52,6 @@ class PolicyRule(StrEnum):
     UNSEEN_COLLAPSES = "unseen collapses"
     COLLAPSED = "collapsed"
     PRUNED = "pruned"
-    RIVAL_COLLAPSED = "rival collapsed"
     OVERTAKEN = "overtaken"
     WAITING_FOR_CONFIRMATION = "waiting for confirmation"
     AMBIGUITY = "ambiguity"
@@ -108,16 +106,6 @@ def collapse_rule(rank: int | None, fresh: float, best_score: float, anything_fo
     if rank is None:
         return PolicyRule.UNSEEN_COLLAPSES if anything_found else None
     return PolicyRule.BEATEN_BY_RIVAL if rank > 0 and best_score - fresh > s.lost_score_gap else None
-
-
-def rival_collapsed(mode: ModeNumbers, tracked_id: int | None, s: TrackingSettings) -> bool:
-    """RIVAL_COLLAPSED: a mode other than the tracked one collapsed lost_rounds rounds in a
-    row (beaten by lost_score_gap, or unseen): it leaves the bank, on the evidence that
-    drops a tracked mode. Kept, such modes hold weight for rounds through the running
-    score's smoothing: in the built-in offices corridor, after a kidnap, the true place led
-    every round by 0.19 while five look-alike offices beaten 1-5 rounds in a row kept 0.2-0.5
-    of the weight, and it stayed `lost` (laser seed 0, never `tracking` again)."""
-    return mode.id != tracked_id and mode.collapses >= s.lost_rounds
 
 
 # --- confirmation and status -------------------------------------------------------------
