@@ -137,24 +137,24 @@ def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_
     assert after(moved, jumped=True, rounds_before=last + 1)[1] is None
 
 
-def test_a_place_the_previous_test_tracked_is_found_again_by_a_confirmed_leader():
-    """Relocalization._found_again: the test's bank leads with rounds_to_track hits (not
-    dominating) at the place the previous, unadopted test's bank tracked: found. Fewer
-    hits, another place, or a previous bank that did not track: not."""
+def test_a_place_the_previous_test_led_confirmed_is_found_again_by_the_next_tests_leader():
+    """Relocalization._found_again: the previous, unadopted test's bank led with
+    rounds_to_track hits (3 after a loss); this test's bank leads at the same place (within
+    the pose-jump gate), from its first hit: found. The previous leader with one hit fewer,
+    another place, no previous test or no leader: not."""
     reloc = Relocalization(Settings())
-    previous = SimpleNamespace(status=Status.TRACKING, best=SimpleNamespace(alignment=Sim2()))
-    reloc.ended = SimpleNamespace(tracker=previous)
+    previous = SimpleNamespace(alignment=Sim2(), hits=3)
+    reloc.ended = SimpleNamespace(tracker=SimpleNamespace(best=previous, rounds_to_track=lambda: 3))
 
-    def found(hits: int, jumped: bool = False):
-        leader = SimpleNamespace(alignment=Sim2(), hits=hits, weight=0.5)
-        bank = SimpleNamespace(best=leader, rounds_to_track=lambda: 3, pose_jumped=lambda a, b, xy, mode: jumped)
-        return reloc._found_again(SimpleNamespace(tracker=bank), np.zeros(2)) is leader
+    def found(jumped: bool = False, leader=SimpleNamespace(alignment=Sim2(), hits=1, weight=0.4)):
+        bank = SimpleNamespace(best=leader, pose_jumped=lambda a, b, xy, mode: jumped)
+        return reloc._found_again(SimpleNamespace(tracker=bank), np.zeros(2)) is leader and leader is not None
 
-    assert found(3) and not found(2) and not found(3, jumped=True)
-    previous.status = Status.LOST
-    assert not found(3)
+    assert found() and not found(jumped=True) and not found(leader=None)
+    previous.hits = 2
+    assert not found()
     reloc.ended = None
-    assert not found(3)
+    assert not found()
 
 
 def _offices_walk(seed: int = 1, sensor: str = "camera", **localizer):

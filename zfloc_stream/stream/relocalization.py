@@ -115,19 +115,21 @@ class Relocalization:
         return verdict
 
     def _found_again(self, test: KidnapTest, sensor_xy) -> Mode | None:
-        """The test's bank leads with a confirmed place (rounds_to_track hits after the loss)
-        that the previous test, which ended without adopting, had tracked: two tests on
-        different frames single out one place, and their evidence adds up though neither
-        bank alone dominates. Carried along the built-in offices corridor (laser seed 1, the
-        second cut) one test tracked the true place but the recent frames fitted it no better
-        than the old one (0.872 against 0.876), the next test led there with 0.39-0.73 of
-        its weight among look-alike offices: the old place stayed reported, never corrected.
-        Returns that place (the bank's leader), else None."""
+        """The test's bank leads at the place where the previous test, which ended without
+        adopting, led confirmed (rounds_to_track hits after the loss): two tests on different
+        frames single out one place, and their evidence adds up though neither bank alone
+        dominated (the first test's frames began before the cut, the second's are few).
+        Carried along the built-in offices corridor, laser seed 4: the first test's bank led
+        at the true place with 4 hits and 0.59 of the weight (look-alike offices kept the
+        rest), the next one led there from its first round, alone; laser seed 1: one test
+        tracked the true place but the recent frames fitted it no better than the old one
+        (0.872 against 0.876), the next led there with 0.39-0.73 of its weight. The place must
+        still be better than the old one (_better). Returns the bank's leader, else None."""
         ended, leader = self.ended, test.tracker.best
-        if ended is None or leader is None or ended.tracker.status is not Status.TRACKING \
-                or leader.hits < test.tracker.rounds_to_track():
+        previous = None if ended is None else ended.tracker.best
+        if previous is None or leader is None or previous.hits < ended.tracker.rounds_to_track():
             return None
-        return None if test.tracker.pose_jumped(ended.tracker.best.alignment, leader.alignment, sensor_xy, leader) else leader
+        return None if test.tracker.pose_jumped(previous.alignment, leader.alignment, sensor_xy, leader) else leader
 
     def left_behind(self, tracker: HypothesisTracker, scheduled: ScheduledRound) -> int | None:
         """A test that ended without adopting (its bank earned `tracking` too late, or on a
