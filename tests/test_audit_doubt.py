@@ -110,31 +110,40 @@ def test_a_test_whose_bank_tracks_the_place_the_tracker_moved_to_is_adopted():
 def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_its_place():
     """Relocalization.left_behind: after a test on OLD ended without adopting, a round whose
     reported mode is another one beyond OLD's pose-jump gate, holding at least
-    JOIN_MIN_WEIGHT, finds the kidnap (returns the
-    test's since; counted, later rounds dropped); OLD itself, or a mode within the gate, does
-    not; nor any mode once confirm_rounds_after_loss + 1 rounds have passed."""
+    JOIN_MIN_WEIGHT or lying where the test's bank led with rounds_to_track hits, finds the
+    kidnap (returns the test's since; counted, later rounds dropped); OLD itself, a mode
+    within the gate, or a light one elsewhere does not; nor any mode once
+    confirm_rounds_after_loss + 1 rounds have passed."""
     scheduled = ScheduledRound(RoundJob(25, None, [], False), 30, np.zeros(3), 0)
+    old_place, bank_place = Sim2(), Sim2(1.0, 0.0, (20.0, 0.0))
 
-    def after(reported, jumped: bool, rounds_before: int = 0):
+    def after(reported, beyond: bool, rounds_before: int = 0, bank_hits: int = 2):
         reloc = Relocalization(Settings())
-        reloc.ended = SimpleNamespace(old_id=OLD.id, old_alignment=Sim2(), since=17)
+        bank = SimpleNamespace(best=SimpleNamespace(alignment=bank_place, hits=bank_hits), rounds_to_track=lambda: 3)
+        reloc.ended = SimpleNamespace(old_id=OLD.id, old_alignment=old_place, since=17, tracker=bank)
         reloc.ended_rounds_left = Settings().tracking.confirm_rounds_after_loss + 1
-        tracker = SimpleNamespace(best=reported, pose_jumped=lambda previous, current, xy, mode: jumped)
+
+        def jumped(previous, current, xy, mode):  # beyond the old place as asked; at the bank's place when there
+            return beyond if previous is old_place else current is not bank_place
+        tracker = SimpleNamespace(best=reported, pose_jumped=jumped)
         for _ in range(rounds_before):
             assert reloc.left_behind(SimpleNamespace(best=OLD), scheduled) is None
         return reloc, reloc.left_behind(tracker, scheduled)
 
-    moved = SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=0.6)
-    reloc, since = after(moved, jumped=True)
+    moved = SimpleNamespace(id=OLD.id + 1, alignment=Sim2(1.0, 0.0, (25.0, 0.0)), weight=0.6)
+    reloc, since = after(moved, beyond=True)
     assert since == 17 and reloc.found == 1 and reloc.adopted_at == 25 and reloc.ended is None
-    assert after(moved, jumped=False)[1] is None  # the same place
-    light = SimpleNamespace(id=OLD.id + 1, alignment=Sim2(), weight=np.nextafter(JOIN_MIN_WEIGHT, 0.0))
-    assert after(light, jumped=True)[1] is None  # the tracker does not lean there (JOIN_MIN_WEIGHT)
-    assert after(OLD, jumped=True)[1] is None  # still the tested mode
-    assert after(None, jumped=True)[1] is None
+    assert after(moved, beyond=False)[1] is None  # the same place
+    light = SimpleNamespace(id=OLD.id + 1, alignment=moved.alignment, weight=np.nextafter(JOIN_MIN_WEIGHT, 0.0))
+    assert after(light, beyond=True)[1] is None  # the tracker does not lean there (JOIN_MIN_WEIGHT)...
+    at_bank = SimpleNamespace(id=OLD.id + 1, alignment=bank_place, weight=light.weight)
+    assert after(at_bank, beyond=True, bank_hits=3)[1] == 17  # ...unless the test's bank led there confirmed
+    assert after(at_bank, beyond=True, bank_hits=2)[1] is None
+    assert after(OLD, beyond=True)[1] is None  # still the tested mode
+    assert after(None, beyond=True)[1] is None
     last = Settings().tracking.confirm_rounds_after_loss
-    assert after(moved, jumped=True, rounds_before=last)[1] == 17
-    assert after(moved, jumped=True, rounds_before=last + 1)[1] is None
+    assert after(moved, beyond=True, rounds_before=last)[1] == 17
+    assert after(moved, beyond=True, rounds_before=last + 1)[1] is None
 
 
 def test_a_place_the_previous_test_led_confirmed_is_found_again_by_the_next_tests_leader():

@@ -125,11 +125,17 @@ class Relocalization:
         tracked the true place but the recent frames fitted it no better than the old one
         (0.872 against 0.876), the next led there with 0.39-0.73 of its weight. The place must
         still be better than the old one (_better). Returns the bank's leader, else None."""
-        ended, leader = self.ended, test.tracker.best
+        leader = test.tracker.best
+        return leader if self._ended_led_at(leader, test.tracker, sensor_xy) else None
+
+    def _ended_led_at(self, mode: Mode | None, tracker: HypothesisTracker, sensor_xy) -> bool:
+        """Is `mode` (of `tracker`) at the place where the previous, unadopted test's bank led
+        confirmed (rounds_to_track hits after the loss), within the pose-jump gate?"""
+        ended = self.ended
         previous = None if ended is None else ended.tracker.best
-        if previous is None or leader is None or previous.hits < ended.tracker.rounds_to_track():
-            return None
-        return None if test.tracker.pose_jumped(previous.alignment, leader.alignment, sensor_xy, leader) else leader
+        if previous is None or mode is None or previous.hits < ended.tracker.rounds_to_track():
+            return False
+        return not tracker.pose_jumped(previous.alignment, mode.alignment, sensor_xy, mode)
 
     def left_behind(self, tracker: HypothesisTracker, scheduled: ScheduledRound) -> int | None:
         """A test that ended without adopting (its bank earned `tracking` too late, or on a
@@ -137,8 +143,10 @@ class Relocalization:
         tracker's own rounds, within as many rounds as a test runs, report a place beyond
         the tested place's pose-jump gate, leaning there more than everywhere else together
         (JOIN_MIN_WEIGHT: where the map lacks the place every score is near 0 and the
-        tracker drifts among modes holding 0.2 of the weight, laser aces 97 #100), the sensor
-        was carried off after all. The frames
+        tracker drifts among modes holding 0.2 of the weight, laser aces 97 #100) or where
+        the test's bank led confirmed (_ended_led_at: two sources name one place; offices
+        camera seed 0, the tracker moved to the bank's place holding under half the weight),
+        the sensor was carried off after all. The frames
         before the test's start then show the old place: the tracker's rounds on the whole
         BEV, which mixes both, keep rivals near the new place (carried along the built-in
         offices corridor: `lost` at the true place for 25 and 27 frames, camera seed 4 and
@@ -147,8 +155,10 @@ class Relocalization:
         ended, reported = self.ended, tracker.best
         if ended is None or reported is None or self.ended_rounds_left <= 0:
             return None
-        if reported.id != ended.old_id and reported.weight >= JOIN_MIN_WEIGHT and ended.old_alignment is not None \
-                and tracker.pose_jumped(ended.old_alignment, reported.alignment, scheduled.plane_pose[:2], reported):
+        sensor_xy = scheduled.plane_pose[:2]
+        if reported.id != ended.old_id and ended.old_alignment is not None \
+                and (reported.weight >= JOIN_MIN_WEIGHT or self._ended_led_at(reported, tracker, sensor_xy)) \
+                and tracker.pose_jumped(ended.old_alignment, reported.alignment, sensor_xy, reported):
             self.ended, self.found, self.adopted_at = None, self.found + 1, scheduled.job.index
             self.audit.forget()
             return ended.since
