@@ -119,7 +119,8 @@ def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_
 
     def after(reported, beyond: bool, rounds_before: int = 0, bank_hits: int = 2):
         reloc = Relocalization(Settings())
-        bank = SimpleNamespace(best=SimpleNamespace(alignment=bank_place, hits=bank_hits), rounds_to_track=lambda: 3)
+        bank = SimpleNamespace(best=SimpleNamespace(alignment=bank_place, hits=bank_hits), rounds_to_track=lambda: 3,
+                               status=Status.LOST)
         reloc.ended = SimpleNamespace(old_id=OLD.id, old_alignment=old_place, since=17, tracker=bank)
         reloc.ended_rounds_left = Settings().tracking.confirm_rounds_after_loss + 1
 
@@ -148,18 +149,23 @@ def test_a_test_that_adopted_nothing_is_found_after_all_when_the_tracker_leaves_
 
 def test_a_place_the_previous_test_led_confirmed_is_found_again_by_the_next_tests_leader():
     """Relocalization._found_again: the previous, unadopted test's bank led with
-    rounds_to_track hits (3 after a loss); this test's bank leads at the same place (within
-    the pose-jump gate), from its first hit: found. The previous leader with one hit fewer,
-    another place, no previous test or no leader: not."""
+    rounds_to_track hits (3 after a loss), not `ambiguous`; this test's bank leads at the same
+    place (within the pose-jump gate), from its first hit: found. The previous leader with
+    one hit fewer or a confirmed close rival, another place, no previous test or no leader: not."""
     reloc = Relocalization(Settings())
     previous = SimpleNamespace(alignment=Sim2(), hits=3)
-    reloc.ended = SimpleNamespace(tracker=SimpleNamespace(best=previous, rounds_to_track=lambda: 3))
+    bank = SimpleNamespace(best=previous, rounds_to_track=lambda: 3, status=Status.LOST)
+    reloc.ended = SimpleNamespace(tracker=bank)
 
     def found(jumped: bool = False, leader=SimpleNamespace(alignment=Sim2(), hits=1, weight=0.4)):
         bank = SimpleNamespace(best=leader, pose_jumped=lambda a, b, xy, mode: jumped)
         return reloc._found_again(SimpleNamespace(tracker=bank), np.zeros(2)) is leader and leader is not None
 
     assert found() and not found(jumped=True) and not found(leader=None)
+    bank.status = Status.AMBIGUOUS  # the previous leader had a confirmed close rival
+    assert not found()
+    bank.status = Status.TRACKING
+    assert found()
     previous.hits = 2
     assert not found()
     reloc.ended = None
