@@ -60,6 +60,20 @@ def test_the_chain_pulls_a_drifted_mode_onto_the_walls_and_continues(plan, hits)
     assert local.mode_id == 1 and centre_error(local.alignment, hits) <= centre_error(first, hits) + 1e-9
 
 
+def test_a_chain_that_explains_less_than_the_mode_starts_again_from_the_mode(plan, hits):
+    """Each step is judged against where it started only: on frames a plan explains little
+    of, a chain of accepted steps could walk away from the mode the rounds keep right (intel
+    810 #100 on the one-face plan: 35 deg turned, 1.5-4.8 m off). A chain the mode's own
+    alignment explains the recent hits better than goes back to the mode."""
+    local = chain(plan)
+    best = mode(OFF)
+    local.update(best, hits, frames_fused=10)
+    walked = Sim2(1.0, 0.3, np.array([1.5, -1.0]))  # where such a chain had got to
+    local.alignment = walked
+    local.update(best, hits, frames_fused=15)  # 5 frames: a step of at most 1 m, too short to walk back
+    assert local.mode_id == 1 and centre_error(local.alignment, hits) < 0.02 < centre_error(walked, hits)
+
+
 def test_local_frames_zero_turns_it_off(plan, hits):
     local = chain(plan, local_frames=0)
     local.update(mode(OFF), hits, frames_fused=10)
