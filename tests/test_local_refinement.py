@@ -74,6 +74,28 @@ def test_a_chain_that_explains_less_than_the_mode_starts_again_from_the_mode(pla
     assert local.mode_id == 1 and centre_error(local.alignment, hits) < 0.02 < centre_error(walked, hits)
 
 
+def gate(metres: float):
+    """A pose-jump gate (HypothesisTracker.pose_jumped's signature): the alignment moved the
+    sensor more than `metres`."""
+    return lambda previous, current, sensor, mode: bool(np.linalg.norm(current.apply(sensor) - previous.apply(sensor)) > metres)
+
+
+def test_the_chain_stays_within_the_modes_pose_jump_gate(plan, hits):
+    """The recent frames alone can fit a wrong place near the mode (a plan that leaves out
+    what they saw): a step beyond the tracker's pose-jump gate of the mode is refused, and a
+    chain found beyond it starts again from the mode."""
+    sensor = [np.array([2.0, 1.5])]
+    wide, narrow = chain(plan), chain(plan)
+    wide.update(mode(OFF), hits, 10, sensor * len(hits), gate(1.0))
+    narrow.update(mode(OFF), hits, 10, sensor * len(hits), gate(0.01))  # OFF is 10 cm from where the hits fit
+    assert wide.mode_id == 1 and centre_error(wide.alignment, hits) < 0.02
+    assert narrow.mode_id is None and narrow.alignment_of_mode(mode(OFF)) is OFF
+    walked = Sim2(1.0, 0.05, np.array([0.3, 0.2]))  # within the step bound, beyond a 0.2 m gate
+    wide.alignment = walked
+    wide.update(mode(OFF), hits, 15, sensor * len(hits), gate(0.2))
+    assert wide.mode_id == 1 and centre_error(wide.alignment, hits) < 0.02
+
+
 def test_local_frames_zero_turns_it_off(plan, hits):
     local = chain(plan, local_frames=0)
     local.update(mode(OFF), hits, frames_fused=10)
