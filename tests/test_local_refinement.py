@@ -82,8 +82,8 @@ def gate(metres: float):
 
 def test_the_chain_stays_within_the_modes_pose_jump_gate(plan, hits):
     """The recent frames alone can fit a wrong place near the mode (a plan that leaves out
-    what they saw): a step beyond the tracker's pose-jump gate of the mode is refused, and a
-    chain found beyond it starts again from the mode."""
+    what they saw): a step beyond the tracker's pose-jump gate of the mode is refused; a
+    chain that explains the recent hits less than the mode starts again from it."""
     sensor = [np.array([2.0, 1.5])]
     wide, narrow = chain(plan), chain(plan)
     wide.update(mode(OFF), hits, 10, sensor * len(hits), gate(1.0))

@@ -3,9 +3,8 @@ alone (LM with the scale held, on the floorplan's face field), so the pose follo
 odometry's drift between rounds and the last metres the BEV fused weigh in.
 
 A chain: each refinement starts from the last one accepted for the same mode, while that
-lies within the tracker's pose-jump gate of the mode's own alignment and explains the
-recent hits at least as well (else from the mode's, which the rounds keep fitting to the
-whole BEV). A step is accepted when it is finite, moves the recent hits' centre by at most
+explains the recent hits at least as well as the mode's own alignment (else from the
+mode's, which the rounds keep fitting to the whole BEV). A step is accepted when it is finite, moves the recent hits' centre by at most
 localizer.local_max_step metres per fused frame since the last refinement (drift is slow:
 a jump is another place, which only a round may propose), stays within the mode's
 pose-jump gate, and explains at least as many of the hits as where it started. A refused
@@ -79,8 +78,8 @@ class LocalRefinement:
         """One refinement of the tracked mode `best` (None: nothing tracked) on the recent
         frames' wall hits (plane frame, one array per frame; recent_cameras: each frame's
         camera position, needed under metric odometry). jumped: the tracker's pose-jump gate
-        (HypothesisTracker.pose_jumped): the chain stays within it of the mode's alignment
-        at the latest camera (None: no gate)."""
+        (HypothesisTracker.pose_jumped): a step beyond it of the mode's alignment at the
+        latest camera is refused (None: no gate)."""
         cfg = self.settings
         metric = self.metric_odometry and recent_cameras is not None
         if metric:
@@ -115,14 +114,16 @@ class LocalRefinement:
         def elsewhere(alignment: Sim2) -> bool:  # another place than the mode's, by the tracker's gate
             return sensor is not None and jumped(own, alignment, sensor, best)
 
-        if continuing and (elsewhere(start) or self._explained(own, points) > self._explained(start, points)):
-            # The chain goes on while it stays at the mode's place and explains the recent
-            # hits at least as well as the mode as the rounds leave it; else it starts
-            # again from the mode. Each step is judged against where it started only, so on
-            # frames a plan explains little of (0-10%: furniture, rooms it leaves out) a
-            # chain of accepted steps walked away from the mode: intel 810 #100 on the
-            # one-face plan, the mode 0.05-0.5 m off the truth for 70 frames while the
-            # chain, 35 deg turned, reported poses 1.5-4.8 m off.
+        if continuing and self._explained(own, points) > self._explained(start, points):
+            # The chain goes on while it explains the recent hits at least as well as the
+            # mode as the rounds leave it; else it starts again from the mode. Each step is
+            # judged against where it started only, so on frames a plan explains little of
+            # (0-10%: furniture, rooms it leaves out) a chain of accepted steps walked away
+            # from the mode: intel 810 #100 on the one-face plan, the mode 0.05-0.5 m off the
+            # truth for 70 frames while the chain, 35 deg turned, reported poses 1.5-4.8 m off.
+            # (Not when the mode moved away from the chain: where the recent frames explain
+            # nothing, e.g. orebro 0 #50 on the plan, the mode moved 0.7 m in a round that
+            # found it nowhere, the chain stayed right.)
             start, continuing = own, False
         field = floorplan_scorer(self.floorplan, self.estimator.scoring).face_field
         refine = self.estimator.refine.model_copy(update={"outlier_distance": cfg.local_outlier_distance})
