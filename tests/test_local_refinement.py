@@ -60,6 +60,42 @@ def test_the_chain_pulls_a_drifted_mode_onto_the_walls_and_continues(plan, hits)
     assert local.mode_id == 1 and centre_error(local.alignment, hits) <= centre_error(first, hits) + 1e-9
 
 
+def test_a_chain_that_explains_less_than_the_mode_starts_again_from_the_mode(plan, hits):
+    """Each step is judged against where it started only: on frames a plan explains little
+    of, a chain of accepted steps could walk away from the mode the rounds keep right (intel
+    810 #100 on the one-face plan: 35 deg turned, 1.5-4.8 m off). A chain the mode's own
+    alignment explains the recent hits better than goes back to the mode."""
+    local = chain(plan)
+    best = mode(OFF)
+    local.update(best, hits, frames_fused=10)
+    walked = Sim2(1.0, 0.3, np.array([1.5, -1.0]))  # where such a chain had got to
+    local.alignment = walked
+    local.update(best, hits, frames_fused=15)  # 5 frames: a step of at most 1 m, too short to walk back
+    assert local.mode_id == 1 and centre_error(local.alignment, hits) < 0.02 < centre_error(walked, hits)
+
+
+def gate(metres: float):
+    """A pose-jump gate (HypothesisTracker.pose_jumped's signature): the alignment moved the
+    sensor more than `metres`."""
+    return lambda previous, current, sensor, mode: bool(np.linalg.norm(current.apply(sensor) - previous.apply(sensor)) > metres)
+
+
+def test_the_chain_stays_within_the_modes_pose_jump_gate(plan, hits):
+    """The recent frames alone can fit a wrong place near the mode (a plan that leaves out
+    what they saw): a step beyond the tracker's pose-jump gate of the mode is refused; a
+    chain that explains the recent hits less than the mode starts again from it."""
+    sensor = [np.array([2.0, 1.5])]
+    wide, narrow = chain(plan), chain(plan)
+    wide.update(mode(OFF), hits, 10, sensor * len(hits), gate(1.0))
+    narrow.update(mode(OFF), hits, 10, sensor * len(hits), gate(0.01))  # OFF is 10 cm from where the hits fit
+    assert wide.mode_id == 1 and centre_error(wide.alignment, hits) < 0.02
+    assert narrow.mode_id is None and narrow.alignment_of_mode(mode(OFF)) is OFF
+    walked = Sim2(1.0, 0.05, np.array([0.3, 0.2]))  # within the step bound, beyond a 0.2 m gate
+    wide.alignment = walked
+    wide.update(mode(OFF), hits, 15, sensor * len(hits), gate(0.2))
+    assert wide.mode_id == 1 and centre_error(wide.alignment, hits) < 0.02
+
+
 def test_local_frames_zero_turns_it_off(plan, hits):
     local = chain(plan, local_frames=0)
     local.update(mode(OFF), hits, frames_fused=10)

@@ -412,7 +412,7 @@ class Localizer:
 
     def _refine_locally(self, timings: dict, outcome: RoundOutcome | None = None) -> None:
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.local.update(self.tracker.best, self.recent.hits, self.frames_fused, self.recent.cameras)
+        self.local.update(self.tracker.best, self.recent.hits, self.frames_fused, self.recent.cameras, self.tracker.pose_jumped)
         timings["local_refinement"] = time.perf_counter() - t0
         if outcome is not None:
             outcome.timings["local_refinement"] = timings["local_refinement"]
