@@ -104,6 +104,9 @@ class Relocalization:
         verdict = test.verdict(found is not None and (self._joins(found, old, sensor_xy, places)
                                                       or self._better(found.alignment, old, scheduled, outcome, places)))
         if verdict is Verdict.CARRIED_OFF:
+            if test.tracker.status is not Status.TRACKING and self.ended is not None and self.ended.tracker.best is not None:
+                # found again: the previous test's rounds at this place count toward its confirmation
+                test.tracker.credit_hits(found, self.ended.tracker.best.hits)
             self.found += 1
             self.adopted_at = scheduled.job.index
             self.audit.forget()  # the test's bank replaces the modes

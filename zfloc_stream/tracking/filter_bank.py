@@ -289,6 +289,11 @@ class HypothesisTracker:
                 mode.tracked_rounds = 0
 
     # --- per frame --------------------------------------------------------------------
+    def credit_hits(self, mode: Mode, hits: int) -> None:
+        """Count hits the mode's place earned in another bank's rounds (a kidnap test's, on
+        other frames) toward its confirmation: the next round decides its status with them."""
+        mode.hits = max(mode.hits, int(hits))
+
     def pose_jumped(self, previous: Sim2 | None, current: Sim2 | None, sensor_xy, mode: Mode | None = None) -> bool:
         """The reported pose of the sensor moved, beyond what odometry carries it, by more
         than the tracker allows: the change of the reported alignment at the sensor (x, y,
