@@ -74,7 +74,8 @@ def test_a_kidnap_test_that_adopts_nothing_leaves_the_tested_place_in_doubt():
     test.rounds_left = 1
     scheduled = ScheduledRound(RoundJob(25, None, [], False, test.since), 30, np.zeros(3), 0)
     now_reported = SimpleNamespace(id=OLD.id + 1)  # the tracker's own round moved on meanwhile
-    places = SimpleNamespace(tracker=SimpleNamespace(modes=[SimpleNamespace(id=OLD.id, alignment=Sim2()), now_reported]))
+    modes = {OLD.id: SimpleNamespace(id=OLD.id, alignment=Sim2()), now_reported.id: now_reported}
+    places = SimpleNamespace(tracker=SimpleNamespace(mode_by_id=modes.get))
     assert reloc.feed(scheduled, RoundOutcome(25, None, None), now_reported, places) is Verdict.NOT_CARRIED_OFF
     assert reloc.doubts(OLD) and not reloc.doubts(now_reported) and not reloc.doubts(None)
     reloc.reset()

@@ -109,12 +109,9 @@ class LocalRefinement:
             # against a true 1.044 for 90 frames, 0.1-0.25 m off).
             s = best.alignment.s
             start = Sim2(s, start.theta, start.apply(centre) - s * start.R @ centre)
-        sensor = None if jumped is None or not recent_cameras else recent_cameras[-1]
-
-        def elsewhere(alignment: Sim2) -> bool:  # another place than the mode's, by the tracker's gate
-            return sensor is not None and jumped(own, alignment, sensor, best)
-
-        if continuing and self._explained(own, points) > self._explained(start, points):
+        start_share = self._explained(start, points)
+        own_share = self._explained(own, points) if continuing else start_share
+        if own_share > start_share:
             # The chain goes on while it explains the recent hits at least as well as the
             # mode as the rounds leave it; else it starts again from the mode. Each step is
             # judged against where it started only, so on frames a plan explains little of
@@ -124,7 +121,7 @@ class LocalRefinement:
             # (Not when the mode moved away from the chain: where the recent frames explain
             # nothing, e.g. orebro 0 #50 on the plan, the mode moved 0.7 m in a round that
             # found it nowhere, the chain stayed right.)
-            start, continuing = own, False
+            start, continuing, start_share = own, False, own_share
         field = floorplan_scorer(self.floorplan, self.estimator.scoring).face_field
         refine = self.estimator.refine.model_copy(update={"outlier_distance": cfg.local_outlier_distance})
         local = alignment_of(refine_batch(field, points, model_rows([start]), refine, "fixed")[0])
@@ -134,8 +131,10 @@ class LocalRefinement:
         shift = float(np.linalg.norm(local.apply(centre) - start.apply(centre)))
         frames = max(1, frames_fused - self._frame)
         self._frame = frames_fused
+        sensor = None if jumped is None or not recent_cameras else recent_cameras[-1]
         keep = (local.is_finite() and shift <= cfg.local_max_step * frames
-                and self._explained(local, points) >= self._explained(start, points) and not elsewhere(local))
+                and self._explained(local, points) >= start_share
+                and not (sensor is not None and jumped(own, local, sensor, best)))  # another place, by the tracker's gate
         if keep:
             self.mode_id, self.alignment = best.id, local
         elif not continuing:  # a refused step keeps the last accepted local alignment

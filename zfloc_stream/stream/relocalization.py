@@ -95,17 +95,16 @@ class Relocalization:
         test = self.test
         if test is None or test.since != scheduled.job.since:
             return None
-        tested = next((m for m in places.tracker.modes if m.id == test.old_id), None)
+        tested = places.tracker.mode_by_id(test.old_id)
         if tested is not None:
             test.old_alignment = tested.alignment
         found = test.feed(scheduled, outcome)  # the place its bank tracks, if any
         sensor_xy = scheduled.plane_pose[:2]
-        found = found if found is not None else self._found_again(test, sensor_xy)
+        again = found is None and (found := self._found_again(test, sensor_xy)) is not None
         verdict = test.verdict(found is not None and (self._joins(found, old, sensor_xy, places)
                                                       or self._better(found.alignment, old, scheduled, outcome, places)))
         if verdict is Verdict.CARRIED_OFF:
-            if test.tracker.status is not Status.TRACKING and self.ended is not None and self.ended.tracker.best is not None:
-                # found again: the previous test's rounds at this place count toward its confirmation
+            if again:  # the previous test's rounds at this place count toward its confirmation
                 test.tracker.credit_hits(found, self.ended.tracker.best.hits)
             self.found += 1
             self.adopted_at = scheduled.job.index
@@ -153,9 +152,9 @@ class Relocalization:
         tracker drifts among modes holding 0.2 of the weight, laser aces 97 #100) or where
         the test's bank led confirmed (_ended_led_at: two sources name one place; offices
         camera seed 0, the tracker moved to the bank's place holding under half the weight),
-        the sensor was carried off after all. The frames
-        before the test's start then show the old place: the tracker's rounds on the whole
-        BEV, which mixes both, keep rivals near the new place (carried along the built-in
+        the sensor was carried off after all. The frames before the test's start then show
+        the old place: the tracker's rounds on the whole BEV, which mixes both, keep rivals
+        near the new place (carried along the built-in
         offices corridor: `lost` at the true place for 25 and 27 frames, camera seed 4 and
         laser seed 0, never `tracking` again). Returns the BEV stamp to forget before (the
         test's since; the kidnap is found, as when a test adopts), else None."""

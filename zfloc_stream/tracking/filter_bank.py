@@ -262,7 +262,7 @@ class HypothesisTracker:
 
     def _update_status(self) -> None:
         """Decide the round's status (status.decide) and apply it to the modes."""
-        tracked = self._mode_by_id(self._tracked_id)
+        tracked = self.mode_by_id(self._tracked_id)
         leader = self.best  # the tracked mode unless an established rival outweighs it
         self._round = round_facts(leader, self.modes, tracked, self._tracked_id, self._was_lost, self.settings)
         rule = decide(self._round).rule
@@ -351,7 +351,8 @@ class HypothesisTracker:
                                           contradicts(frame, recovery), self.settings)
         return decision, confidence
 
-    def _mode_by_id(self, mode_id: int | None) -> Mode | None:
+    def mode_by_id(self, mode_id: int | None) -> Mode | None:
+        """The live mode with this id, None when it left the bank."""
         return next((m for m in self.modes if m.id == mode_id), None)
 
     @property
@@ -393,14 +394,14 @@ class HypothesisTracker:
     def tracked_mode(self) -> Mode | None:
         """The mode being tracked (None while initializing, ambiguous before any mode was
         tracked, or lost)."""
-        return self._mode_by_id(self._tracked_id)
+        return self.mode_by_id(self._tracked_id)
 
     @property
     def best(self) -> Mode | None:
         """The reported mode (policy.reported_mode): the tracked mode while no
         established rival outweighs it; else the heaviest confirmed mode, else the
         heaviest mode, or a newcomer clearly ahead of them."""
-        return policy.reported_mode(self.modes, self._mode_by_id(self._tracked_id), self.settings)[0]
+        return policy.reported_mode(self.modes, self.mode_by_id(self._tracked_id), self.settings)[0]
 
     def alternatives(self) -> list[Mode]:
         """Every live mode except best, heaviest first."""
