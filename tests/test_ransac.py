@@ -161,6 +161,20 @@ def test_warm_start_is_scored_and_refined(plain):
 
 
 
+def test_a_revisited_alignment_comes_back_refined_and_scored_without_samples_around_it(plain):
+    """revisit (a previous round's runner-up): refined and scored like a warm start, even
+    when the round's own draws find something else, but no guided models are drawn about it."""
+    fp, truth, obs = plain
+    start = Sim2(truth.s * 1.02, truth.theta + 0.02, (truth.t[0] + 0.15, truth.t[1] - 0.1))
+    far = Sim2(truth.s, truth.theta + 1.0, (truth.t[0] + 5.0, truth.t[1]))
+    result = localize(fp, obs, CFG.estimator, make_rng(6, "t"), warm_start=[far], iterations=0, revisit=[start])
+    guided = localize(fp, obs, CFG.estimator, make_rng(6, "t"), warm_start=[far], iterations=0)
+    assert result.n_models == guided.n_models  # nothing sampled about the revisited one
+    near = [h for h in result.hypotheses if pose_error(h.alignment, truth)[0] < 0.1]
+    assert near and near[0].solver == "warm"
+    assert not any(pose_error(h.alignment, truth)[0] < 0.1 for h in guided.hypotheses)
+
+
 @pytest.mark.parametrize("mode", ["free", "prior"])
 def test_guided_samples_stay_near_the_mode_and_correct_it(plain, mode):
     fp, truth, obs = plain

@@ -37,6 +37,12 @@ def test_birth_score_gap():
     assert policy.birth_rule(1, below(0.25), 0.5, s) is None
 
 
+def test_revisit_score_gap():
+    s = S.model_copy(update={"revisit_score_gap": 0.25})
+    assert policy.revisit_rule(0.25, 0.5, s) == policy.PolicyRule.REVISIT
+    assert policy.revisit_rule(below(0.25), 0.5, s) is None
+
+
 def test_confirm_score_gap():
     s = S.model_copy(update={"confirm_score_gap": 0.25})
     assert policy.near_top(0.25, 0.5, s) and not policy.near_top(below(0.25), 0.5, s)
@@ -251,6 +257,38 @@ def test_max_modes(n):
         tracker = HypothesisTracker(S.model_copy(update={"max_modes": limit}))
         tracker.update(hyps, SENSOR_A, frame=0)
         assert len(tracker.modes) == kept
+
+
+def test_max_modes_never_drops_the_tracked_mode():
+    """A round of max_modes far newborns, each scoring above the tracked mode: the lightest
+    newborn leaves the full bank, the tracked mode stays (its own rules decide when it goes)."""
+    s = S.model_copy(update={"max_modes": 3})
+    tracker = HypothesisTracker(s)
+    for r in range(3):
+        tracker.update([Hyp(BASE, 0.5)], SENSOR_A, frame=5 * r)
+    assert tracker.status == "tracking"
+    tracked = tracker.tracked_mode.id
+    rivals = [Hyp(Sim2(1.0, 0.5 * k, (30.0 * k, 0.0)), 0.6 - 0.01 * k) for k in (1, 2, 3)]
+    tracker.update(rivals + [Hyp(BASE, 0.45)], SENSOR_A, frame=15)
+    assert len(tracker.modes) == 3 and tracked in [m.id for m in tracker.modes]
+    assert tracker.tracked_mode is not None and tracker.tracked_mode.id == tracked
+
+
+def test_runners_up_are_the_unexplained_hypotheses_within_the_revisit_gap():
+    """Of a round's hypotheses, those no mode explains and that start none but score within
+    revisit_score_gap of the best come back as runners_up, best first; the rest do not."""
+    s = S.model_copy(update={"birth_score_gap": 0.1, "revisit_score_gap": 0.25})
+    far = [Sim2(1.0, 0.5 * k, (30.0 * k, 0.0)) for k in range(1, 5)]
+    tracker = HypothesisTracker(s)
+    tracker.update([Hyp(BASE, 0.5), Hyp(far[0], 0.45), Hyp(far[1], 0.3), Hyp(far[2], 0.25), Hyp(far[3], below(0.25))],
+                   SENSOR_A, frame=0)
+    assert len(tracker.modes) == 2  # the best and the one within birth_score_gap
+    assert [tuple(np.asarray(a.t)) for a in tracker.runners_up] == [tuple(np.asarray(f.t)) for f in far[1:3]]
+    tracker.update([Hyp(BASE, 0.5)], SENSOR_A, frame=5)  # a round without near misses forgets them
+    assert tracker.runners_up == []
+    for r in range(2, 5):  # once a mode is tracked, near misses are not looked at again
+        tracker.update([Hyp(BASE, 0.5), Hyp(far[1], 0.3)], SENSOR_A, frame=5 * r)
+    assert tracker.status == "tracking" and tracker.runners_up == []
 
 
 @pytest.mark.parametrize("name, delta", [("merge_translation", {"dq": (0.25, 0.0)}),

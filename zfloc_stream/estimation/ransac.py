@@ -155,6 +155,7 @@ def localize(
     iterations: int | None = None,
     global_search: bool = True,
     prior: BoundPrior | None = None,
+    revisit: Sequence[Sim2] = (),
 ) -> LocalizationResult:
     """Align the BEV observation to the floorplan; hypotheses ranked best first.
 
@@ -166,15 +167,19 @@ def localize(
     hypotheses inside and outside it are ranked apart (each up to max_hypotheses), so the
     places it names are never crowded out and the best place elsewhere is still known.
 
+    revisit: alignments scored again beside the warm starts, without sampling around them
+    (the previous round's runners-up): each comes back refined and scored unless a kept
+    hypothesis stands for it.
+
     Runs its independent pieces on estimator.threads threads (threads.py), unless the
     caller set the round's thread count already (stream/scheduler.py's run_round)."""
     with threads.limit(threads.resolve(settings.threads), unless_set=True):
-        return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search, prior)
+        return _localize(floorplan, obs, settings, rng, scale_prior, warm_start, iterations, global_search, prior, revisit)
 
 
 def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: np.random.Generator, scale_prior: float,
               warm_start: Sequence[Sim2], iterations: int | None, global_search: bool,
-              prior: BoundPrior | None = None) -> LocalizationResult:
+              prior: BoundPrior | None = None, revisit: Sequence[Sim2] = ()) -> LocalizationResult:
     cfg = settings
     iterations = cfg.ransac.iterations if iterations is None else int(iterations)
     _validate(obs, scale_prior, iterations)
@@ -246,8 +251,10 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         _best_first(rows)
         kept = np.concatenate(kept) if kept else np.zeros((0, 4))
     t2, c2 = ranking_clock
-    if warm:  # every live mode gets its fresh score, even when it ranks below max_hypotheses
-        rows += _missing_warm_starts(floorplan, obs, view, warm, kept, anchor, cfg)
+    # every live mode (and each runner-up to revisit) gets its fresh score, even when it ranks below max_hypotheses
+    again = warm + [w for w in revisit if isinstance(w, Sim2) and w.is_finite()]
+    if again:
+        rows += _missing_warm_starts(floorplan, obs, view, again, kept, anchor, cfg)
         _best_first(rows)
     t3, c3 = time.perf_counter(), time.thread_time()
 

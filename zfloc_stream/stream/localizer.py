@@ -291,7 +291,7 @@ class Localizer:
         tracked mode unless a global search is asked for or a prior is active (checked against elsewhere)."""
         prior = self._prior.for_round
         tracked = self.tracker.confidently_tracking and not self.rounds.global_search_wanted and prior is None
-        return RoundJob(index, None, self.tracker.warm_start(), tracked, prior=prior)
+        return RoundJob(index, None, self.tracker.warm_start(), tracked, prior=prior, revisit=tuple(self.tracker.runners_up))
 
     def _start_round(self, mode: str, job: RoundJob, plane_pose: np.ndarray, timings: dict) -> None:
         """Start the round `job` describes on what the BEV holds now (since job.since), where

@@ -59,6 +59,7 @@ class RoundJob:
     since: int = 0  # a kidnap test: the snapshot holds only what frames from this BEV stamp on saw (0: not a test)
     prior: BoundPrior | None = None  # the caller's pose prior, while it is active (prior.py): its global search uses it
     audit: bool = False  # the audit's round (localizer.audit_frames): a global search on the frames since `since`
+    revisit: tuple[Sim2, ...] = ()  # the previous round's runners-up (HypothesisTracker.runners_up), scored again
 
 
 @dataclass
@@ -135,6 +136,7 @@ def _compute_round(floorplan, settings: Settings, job: RoundJob) -> RoundOutcome
             make_rng(cfg.seed, "ransac", job.index),
             scale_prior=cfg.estimator.scale_prior,
             warm_start=job.warm_start,
+            revisit=job.revisit,
             iterations=cfg.estimator.ransac.tracking_iterations if job.tracked else cfg.estimator.ransac.iterations,
             global_search=not job.tracked,
             prior=job.prior,

@@ -9,13 +9,14 @@ softmax(weight_gain * running score) over the live modes.
 |---|---|---|
 | BEST_STARTS_A_MODE | the round's best unexplained hypothesis starts a mode | - |
 | BIRTH_GAP | another one starts a mode within birth_score_gap of the best | birth_score_gap |
+| REVISIT | one that starts no mode but scores within revisit_score_gap of the best is scored again next round | revisit_score_gap |
 | PRIOR_HEAD_START | a mode born where the caller's prior vouches for it (prior.py) starts with more hits | prior.confirm_rounds |
 | NEAR_TOP | a mode counts a hit when within confirm_score_gap of the round's best | confirm_score_gap |
 | CONFIRMED | hits >= confirm_rounds (confirm_rounds_after_loss after a loss) | confirm_rounds, confirm_rounds_after_loss |
 | BEATEN_BY_RIVAL | the mode's match ranks below a hypothesis scoring lost_score_gap more: a collapse | lost_score_gap |
 | UNSEEN_COLLAPSES | nothing matched the mode while the round found something: a collapse | - |
 | COLLAPSED | lost_rounds collapses in a row: the tracked mode is lost | lost_rounds |
-| PRUNED | the tracked mode left the bank (pruned, merged away): lost | prune_weight, max_modes |
+| PRUNED | the tracked mode left the bank (pruned under prune_weight, merged away; max_modes never drops it): lost | prune_weight, max_modes |
 | OVERTAKEN | an established rival is reported instead of the tracked mode: lost | rival_established_rounds |
 | AMBIGUITY | another confirmed mode holds >= ambiguity_ratio of the leader's weight | ambiguity_ratio |
 | THIN_EVIDENCE | the leader holds <= dominance_weight of the weight, or (not yet tracked) the round did not single it out | dominance_weight, confirm_score_gap |
@@ -46,6 +47,7 @@ class PolicyRule(StrEnum):
 
     BEST_STARTS_A_MODE = "best starts a mode"
     BIRTH_GAP = "birth gap"
+    REVISIT = "revisit"
     NEAR_TOP = "near the top"
     CONFIRMED = "confirmed"
     BEATEN_BY_RIVAL = "beaten by a rival"
@@ -84,6 +86,13 @@ def birth_rule(rank: int, score: float, best_score: float, s: TrackingSettings) 
     if rank == 0:
         return PolicyRule.BEST_STARTS_A_MODE
     return PolicyRule.BIRTH_GAP if score >= best_score - s.birth_score_gap else None
+
+
+def revisit_rule(score: float, best_score: float, s: TrackingSettings) -> str | None:
+    """REVISIT: an unexplained hypothesis that started no mode (birth_rule None) but scored
+    within revisit_score_gap of the round's best is scored again in the next round; None:
+    forgotten."""
+    return PolicyRule.REVISIT if score >= best_score - s.revisit_score_gap else None
 
 
 def birth_hits(head_start: int) -> int:
