@@ -7,6 +7,7 @@ import importlib
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks import harness
@@ -121,3 +122,38 @@ def test_bad_common_options_are_one_error_line_and_exit_2(argv, message, capsys)
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1] and "error:" in err[-1] and not any("Traceback" in line for line in err)
+
+
+def _still_sensor(fp, truth, centre, radius, frames=31):
+    """Wall hits and plane poses of a sensor standing at `centre` (floorplan frame) for
+    `frames` frames, its odometry plane mapped onto the floorplan by `truth`."""
+    from plan_helpers import observe
+
+    hits = observe(fp, truth, np.asarray(centre, dtype=float), radius).wall_points
+    x, y = truth.inverse().apply(np.asarray(centre, dtype=float))
+    true_pose = np.array([*centre, 0.0])
+    return [hits] * frames, [(x, y, -truth.theta)] * frames, np.tile(true_pose, (frames, 1))
+
+
+def test_evidence_frames_asks_the_exact_search_whether_the_hits_tell_the_place():
+    """eval_scenes --evidence: hits that fit one place of an asymmetric building tell it at
+    once (5 frames); the same corridor stretch seen in a corridor twice its length, no end in
+    sight, fits every shift along it: never within 30 frames."""
+    from plan_helpers import building
+    from zfloc_stream.geometry.sim2 import Sim2
+    from zfloc_stream.plans.floorplan import Floorplan
+    from benchmarks.evaluation.eval_scenes import evidence_frames
+
+    fp, truth = building(), Sim2(1.0, 0.4, (3.0, -1.0))
+    hits, plane, poses = _still_sensor(fp, truth, (10.5, 3.0), 4.0)
+    assert evidence_frames(fp, hits, plane, poses, 0, 1.0) == 5
+
+    res = 0.05
+    occ = np.zeros((int(3 / res), int(60 / res)), dtype=bool)
+    occ[:4], occ[-4:] = True, True  # two walls 60 m long, 2.6 m apart, no ends seen
+    corridor = Floorplan.from_occupancy(occ, res, (0.0, 0.0))
+    wall_points = np.array([(x, y) for x in np.arange(25.0, 35.0, 0.05) for y in (0.2, 2.8)])
+    hits = [truth.inverse().apply(wall_points)] * 31
+    x, y = truth.inverse().apply(np.array([30.0, 1.5]))
+    plane, poses = [(x, y, -truth.theta)] * 31, np.tile([30.0, 1.5, 0.0], (31, 1))
+    assert evidence_frames(corridor, hits, plane, poses, 0, 1.0) is None
