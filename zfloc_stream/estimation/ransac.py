@@ -86,6 +86,11 @@ def _missing_warm_starts(floorplan, obs, view, warm, kept: np.ndarray, anchor, c
     return rows
 
 
+def _usable(alignments: Sequence[Sim2]) -> list[Sim2]:
+    """The finite Sim2s of a caller's warm starts or revisits (anything else is skipped)."""
+    return [a for a in alignments if isinstance(a, Sim2) and a.is_finite()]
+
+
 def _labels_of(labels: list[tuple[str, int]], index: np.ndarray) -> list[str]:
     """The solver (or WARM, GUIDED, CORRELATIVE) of each model in `index`, from the
     per-block (label, count) list: a round holds ~10^5 models and keeps a few dozen, so
@@ -194,7 +199,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
     fp = floorplan_matches(floorplan, cfg.solvers)
     bev = BevSamples(obs, full_cfg.primitives.lines, cfg.solvers, full_cfg.floorplan.neighbour_distance / scale_prior)
     pool = solver_pool(cfg, bev, fp)
-    warm = [w for w in warm_start if isinstance(w, Sim2) and w.is_finite()]
+    warm = _usable(warm_start)
     blocks, labels = [], []  # labels: (solver, model count) per block, in block order
     if pool and iterations > 0:
         counts = np.bincount(rng.integers(len(pool), size=iterations), minlength=len(pool))
@@ -252,7 +257,7 @@ def _localize(floorplan, obs: BevObservation, settings: EstimatorSettings, rng: 
         kept = np.concatenate(kept) if kept else np.zeros((0, 4))
     t2, c2 = ranking_clock
     # every live mode (and each runner-up to revisit) gets its fresh score, even when it ranks below max_hypotheses
-    again = warm + [w for w in revisit if isinstance(w, Sim2) and w.is_finite()]
+    again = warm + _usable(revisit)
     if again:
         rows += _missing_warm_starts(floorplan, obs, view, again, kept, anchor, cfg)
         _best_first(rows)

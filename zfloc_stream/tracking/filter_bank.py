@@ -109,7 +109,7 @@ class HypothesisTracker:
         matched, explained = self._associate(meas)
         for mode in self.modes:
             self._score_mode(mode, matched.get(mode.id), meas, scores)
-        self._runners_up = []
+        near_misses = []
         for j in range(len(hyps)):
             if explained[j]:
                 continue
@@ -117,12 +117,11 @@ class HypothesisTracker:
                 self._birth(meas[j], scores[j], sensor, near_top=policy.near_top(scores[j], scores[0], self.settings),
                             hits=policy.birth_hits(head[j]))
             elif policy.revisit_rule(scores[j], scores[0], self.settings):
-                self._runners_up.append(hyps[j].alignment)
+                near_misses.append(hyps[j].alignment)
         self._merge()
         self._reweight_and_prune()
         self._update_status()
-        if self.status is not Status.INITIALIZING:
-            self._runners_up = []
+        self._runners_up = near_misses if self.status is Status.INITIALIZING else []
 
     def _check_inputs(self, hypotheses, sensor_xy, frame) -> np.ndarray:
         try:
