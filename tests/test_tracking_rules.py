@@ -274,6 +274,33 @@ def test_max_modes_never_drops_the_tracked_mode():
     assert tracker.tracked_mode is not None and tracker.tracked_mode.id == tracked
 
 
+@pytest.mark.parametrize("n", [1, 3, 4])
+def test_lost_rounds_drop_a_rival_that_fell_behind(n):
+    """FELL_BEHIND (policy.fell_behind): a mode not tracked leaves the bank at lost_rounds
+    collapses in a row, not one before; the tracked mode never (COLLAPSED decides)."""
+    s = S.model_copy(update={"lost_rounds": n})
+    assert policy.fell_behind(mode(collapses=n), False, s)
+    assert not policy.fell_behind(mode(collapses=n - 1), False, s)
+    assert not policy.fell_behind(mode(collapses=n), True, s)
+
+
+@pytest.mark.parametrize("gap, leaves", [(0.25, False), (below(0.25), True)])
+def test_a_rival_beaten_by_more_than_lost_score_gap_leaves_the_bank_after_lost_rounds_rounds(gap, leaves):
+    """Two modes born in one round; then every round scores the rival 0.25 below the leader.
+    With lost_score_gap just below 0.25 each round is a collapse, and the rival leaves after
+    lost_rounds of them (its weight alone would keep it); at 0.25 it stays."""
+    s = S.model_copy(update={"lost_score_gap": gap})
+    rival = Sim2(1.0, 0.5, (30.0, 0.0))
+    tracker = HypothesisTracker(s)
+    tracker.update([Hyp(BASE, 0.5), Hyp(rival, 0.45)], SENSOR_A, frame=0)
+    assert len(tracker.modes) == 2
+    for r in range(1, s.lost_rounds + 1):
+        assert len(tracker.modes) == 2  # not before lost_rounds collapses
+        tracker.update([Hyp(BASE, 0.5), Hyp(rival, 0.25)], SENSOR_A, frame=5 * r)
+        assert min(m.weight for m in tracker.modes) >= s.prune_weight
+    assert len(tracker.modes) == (1 if leaves else 2)
+
+
 def test_runners_up_are_the_unexplained_hypotheses_within_the_revisit_gap():
     """Of a round's hypotheses, those no mode explains and that start none but score within
     revisit_score_gap of the best come back as runners_up, best first; the rest do not."""

@@ -59,8 +59,8 @@ class TrackingSettings(Section):
     # real laser windows' tracking frames were 1 m+ off (16 of 200 windows, rivals holding
     # 30-47%); at 0.9 0.4%, camera 0.2%, the same poses (docs/status.md).
     dominance_weight: float = Field(0.9, ge=0, lt=1)
-    lost_score_gap: float = Field(0.1, ge=0, le=10)  # the tracked mode collapses in a round when a rival scores this much more (or nothing matches it)...
-    lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: lost (the rival, if any, takes over)
+    lost_score_gap: float = Field(0.1, ge=0, le=10)  # a mode collapses in a round when a rival scores this much more (or nothing matches it)...
+    lost_rounds: int = Field(3, ge=1, le=1000)  # ...this many rounds in a row: the tracked one is lost (the rival, if any, takes over), another leaves the bank
     # after a loss a mode needs this many hits (at least confirm_rounds) before it is tracked:
     # the evidence it took to drop a track is what it takes to trust the next one
     confirm_rounds_after_loss: int = Field(3, ge=1, le=1000)

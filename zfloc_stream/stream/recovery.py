@@ -17,7 +17,8 @@ frames from the run's start on saw alone (the old place among their warm starts,
 it competes on the same evidence). It must earn `tracking` there by the tracker's own
 rules, as after a loss (confirm_rounds_after_loss hits, dominance, no close rival), and
 then be a better place (better_place): elsewhere than the tracked one, and explaining the
-recent frames as the monitor wants them explained, better than the old place. Then the
+recent frames as the monitor wants them explained, better than the old place (a test an
+audit started: its own round still outscores the old place, audit.py). Then the
 localizer adopts the bank and the BEV forgets what only older frames saw. If not within
 confirm_rounds_after_loss + 1 rounds, the test ends and nothing is lost: the BEV is as it
 was and the tracker's own rounds went on meanwhile. No frame is `tracking` while a test

@@ -244,16 +244,18 @@ class HypothesisTracker:
         self.modes = sorted(keep, key=lambda m: m.id)
 
     def _reweight_and_prune(self) -> None:
-        """Modes under prune_weight leave; of the rest the heaviest max_modes stay, the
-        tracked mode always among them: a round's newborns crowding the bank is no evidence
-        against it (its own rules, collapse or a confirmed rival, decide when it goes).
-        Measured: on a plan lacking the rooms the robot walked into (aces 0 #50), nine
-        one-hit rivals pushed out the mode tracked 0.2 m off the truth."""
+        """Modes under prune_weight leave, and those not tracked that fell behind
+        (policy.fell_behind); of the rest the heaviest max_modes stay, the tracked mode
+        always among them: a round's newborns crowding the bank is no evidence against it
+        (its own rules, collapse or a confirmed rival, decide when it goes). Measured: on a
+        plan lacking the rooms the robot walked into (aces 0 #50), nine one-hit rivals
+        pushed out the mode tracked 0.2 m off the truth."""
         s = self.settings
         self._normalise()
         by_weight = sorted(self.modes, key=lambda m: (m.id != self._tracked_id, -tie_key(m.weight), m.id))
         self.modes = sorted(
-            [m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight], key=lambda m: m.id
+            [m for m in by_weight[: s.max_modes] if m.weight >= s.prune_weight
+             and not policy.fell_behind(m, m.id == self._tracked_id, s)], key=lambda m: m.id
         )
         self._normalise()
 
