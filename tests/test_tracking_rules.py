@@ -276,12 +276,14 @@ def test_max_modes_never_drops_the_tracked_mode():
 
 @pytest.mark.parametrize("n", [1, 3, 4])
 def test_lost_rounds_drop_a_rival_that_fell_behind(n):
-    """FELL_BEHIND (policy.fell_behind): a mode not tracked leaves the bank at lost_rounds
-    collapses in a row, not one before; the tracked mode never (COLLAPSED decides)."""
+    """FELL_BEHIND (policy.fell_behind): a mode neither tracked nor confirmed leaves the bank
+    at lost_rounds collapses in a row, not one before; the tracked mode never (COLLAPSED
+    decides), nor a confirmed one (confirm_rounds hits)."""
     s = S.model_copy(update={"lost_rounds": n})
-    assert policy.fell_behind(mode(collapses=n), False, s)
-    assert not policy.fell_behind(mode(collapses=n - 1), False, s)
-    assert not policy.fell_behind(mode(collapses=n), True, s)
+    assert policy.fell_behind(mode(collapses=n, hits=S.confirm_rounds - 1), False, s)
+    assert not policy.fell_behind(mode(collapses=n - 1, hits=S.confirm_rounds - 1), False, s)
+    assert not policy.fell_behind(mode(collapses=n, hits=S.confirm_rounds - 1), True, s)
+    assert not policy.fell_behind(mode(collapses=n, hits=S.confirm_rounds), False, s)
 
 
 @pytest.mark.parametrize("gap, leaves", [(0.25, False), (below(0.25), True)])

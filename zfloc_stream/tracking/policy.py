@@ -16,7 +16,7 @@ softmax(weight_gain * running score) over the live modes.
 | BEATEN_BY_RIVAL | the mode's match ranks below a hypothesis scoring lost_score_gap more: a collapse | lost_score_gap |
 | UNSEEN_COLLAPSES | nothing matched the mode while the round found something: a collapse | - |
 | COLLAPSED | lost_rounds collapses in a row: the tracked mode is lost | lost_rounds |
-| FELL_BEHIND | lost_rounds collapses in a row: a mode not tracked leaves the bank | lost_rounds |
+| FELL_BEHIND | lost_rounds collapses in a row: a mode neither tracked nor confirmed leaves the bank | lost_rounds |
 | PRUNED | the tracked mode left the bank (pruned under prune_weight, merged away; max_modes never drops it): lost | prune_weight, max_modes |
 | OVERTAKEN | an established rival is reported instead of the tracked mode: lost | rival_established_rounds |
 | AMBIGUITY | another confirmed mode holds >= ambiguity_ratio of the leader's weight | ambiguity_ratio |
@@ -120,15 +120,17 @@ def collapse_rule(rank: int | None, fresh: float, best_score: float, anything_fo
 
 
 def fell_behind(mode: ModeNumbers, tracked: bool, s: TrackingSettings) -> bool:
-    """FELL_BEHIND: a mode not tracked that collapsed lost_rounds rounds in a row (beaten by
-    lost_score_gap, or unseen while the round found something) leaves the bank: the
-    evidence that drops a tracked mode (COLLAPSED) drops a rival too. Kept, such rivals
-    cap the leader's weight however far behind they stay: carried along the built-in
-    offices corridor (laser seed 0, second cut), a kidnap test's bank led at the true
-    place with 0.87 while four look-alike offices, re-found at 0.65-0.69 every round,
-    kept 0.17 of the weight; the leader never passed dominance_weight and the test ended
-    without adopting it."""
-    return not tracked and mode.collapses >= s.lost_rounds
+    """FELL_BEHIND: a mode neither tracked nor confirmed that collapsed lost_rounds rounds in
+    a row (beaten by lost_score_gap, or unseen while the round found something) leaves the
+    bank: the evidence that drops a tracked mode (COLLAPSED) drops a rival the rounds never
+    re-found near the top. Kept, such rivals cap the leader's weight however far behind
+    they stay: carried along the built-in offices corridor (laser seed 0, second cut), a
+    kidnap test's bank led at the true place with 0.87 while four look-alike offices,
+    re-found at 0.65-0.69 every round, kept 0.17 of the weight; the leader never passed
+    dominance_weight and the test ended without adopting it. A confirmed mode keeps its
+    place: on the shared laser window aces 97 #100 the true place, lost in rooms the map
+    lacks and beaten there for three rounds, was dropped and a place 47 m off reported."""
+    return not tracked and not is_confirmed(mode, s) and mode.collapses >= s.lost_rounds
 
 
 # --- confirmation and status -------------------------------------------------------------
