@@ -370,9 +370,10 @@ def test_with_nothing_tracked_a_clearly_better_newcomer_is_reported_before_it_is
 # --- the evidence behind `tracking` (issue 26) ----------------------------------------------
 def _leader_with_rival(dominance_weight: float, rounds: int = 8):
     """TRUE scored 0.8 every round, a FAR rival 0.12 lower (not near the top, never
-    confirmed, but carrying some of the weight)."""
+    confirmed, but carrying some of the weight; lost_score_gap 0.15 here, so that it does
+    not fall behind and leave the bank, policy.fell_behind)."""
     rng = make_rng(3, "dominance")
-    tracker = HypothesisTracker(TrackingSettings(dominance_weight=dominance_weight))
+    tracker = HypothesisTracker(TrackingSettings(dominance_weight=dominance_weight, lost_score_gap=0.15))
     statuses = run_rounds(tracker, 0, rounds, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.68)])
     return tracker, statuses
 
@@ -401,7 +402,8 @@ def test_a_tracked_mode_losing_its_dominance_is_ambiguous_and_keeps_its_place():
 
 def test_before_anything_was_tracked_a_leader_without_dominance_is_initializing():
     rng = make_rng(5, "dominance")
-    tracker = HypothesisTracker(TrackingSettings(dominance_weight=0.99))
+    # the rival within lost_score_gap: it stays (policy.fell_behind) and keeps some of the weight
+    tracker = HypothesisTracker(TrackingSettings(dominance_weight=0.99, lost_score_gap=0.15))
     statuses = run_rounds(tracker, 0, 4, lambda r: [seen(TRUE, rng, r, 0.8), seen(FAR, rng, r, 0.7)])
     assert statuses == ["initializing"] * 4
 
