@@ -244,8 +244,8 @@ class HypothesisTracker:
         self.modes = sorted(keep, key=lambda m: m.id)
 
     def _reweight_and_prune(self) -> None:
-        """Modes under prune_weight leave, and those not tracked that fell behind
-        (policy.fell_behind); of the rest the heaviest max_modes stay, the tracked mode
+        """Modes under prune_weight leave, and those neither tracked nor confirmed that fell
+        behind (policy.fell_behind); of the rest the heaviest max_modes stay, the tracked mode
         always among them: a round's newborns crowding the bank is no evidence against it
         (its own rules, collapse or a confirmed rival, decide when it goes). Measured: on a
         plan lacking the rooms the robot walked into (aces 0 #50), nine one-hit rivals
