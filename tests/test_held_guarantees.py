@@ -52,6 +52,39 @@ def test_sigint_closes_the_session_and_loses_no_frame(tmp_path):
     assert rows >= 6 and frames >= rows
 
 
+def _raised_from(cause: BaseException) -> SystemError:
+    """A SystemError chained to `cause`, as compiled code reports an exception raised in a
+    Python callback (numba loading a kernel from its cache when Ctrl-C lands)."""
+    try:
+        try:
+            raise cause
+        except BaseException as inner:
+            raise SystemError("returned a result with an exception set") from inner
+    except SystemError as outer:
+        return outer
+
+
+def test_an_interrupt_inside_compiled_code_ends_as_ctrl_c_does(monkeypatch, capsys):
+    """interruption_in finds the interrupt behind the SystemError (SIGTERM's too) and the
+    CLI ends with its one line and exit 130 / 143; any other SystemError stays an error."""
+    from zfloc_stream.tools import cli
+    from zfloc_stream.tools.signals import Terminated, interruption_in
+
+    assert isinstance(interruption_in(_raised_from(KeyboardInterrupt())), KeyboardInterrupt)
+    assert isinstance(interruption_in(_raised_from(Terminated())), Terminated)
+    assert interruption_in(_raised_from(ValueError())) is None and interruption_in(None) is None
+    for cause, code, line in ((KeyboardInterrupt(), 130, "interrupted"), (Terminated(), 143, "terminated (SIGTERM)")):
+        def stopped(args, cause=cause):
+            raise _raised_from(cause)
+        monkeypatch.setattr(cli, "cmd_demo", stopped)
+        assert cli.main(["demo"]) == code
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"zfloc-stream: {line}: outputs written so far were closed; exit {code}"]
+    monkeypatch.setattr(cli, "cmd_demo", lambda args: (_ for _ in ()).throw(_raised_from(ValueError())))
+    with pytest.raises(SystemError):
+        cli.main(["demo"])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["SIGINT", "SIGTERM", "SIGKILL"])
 def test_thirty_stops_lose_no_finished_frame(tmp_path, sig):

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import InputError, ZflocError
 from .prior_options import add_prior_options, prior_overrides
 from .cli_support import CliParser, install_warning_format, one_line, prepare_out_dir, print_warning
-from .signals import interrupted, terminate_as_interrupt
+from .signals import interrupted, interruption_in, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-stream demo                                   # apartment scene, seed 0, into ./zfloc-demo
@@ -389,6 +389,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt as err:
         return interrupted("zfloc-stream", err)
+    except SystemError as err:  # an interrupt that landed inside compiled code (interruption_in)
+        if (stop := interruption_in(err)) is None:
+            raise
+        return interrupted("zfloc-stream", stop)
     except BrokenPipeError:  # output piped into e.g. head: not an error of ours
         import os
 

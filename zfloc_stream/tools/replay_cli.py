@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import InputError, SessionLogError, ZflocError
 from .cli_support import CliParser, Progress, install_warning_format
-from .signals import interrupted, terminate_as_interrupt
+from .signals import interrupted, interruption_in, terminate_as_interrupt
 
 EPILOG = """examples:
   zfloc-replay session.mcap --check               # same decisions, numbers within tolerance? exit 0, else 1 + first divergence
@@ -196,6 +196,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt as err:
         return interrupted("zfloc-replay", err)
+    except SystemError as err:  # an interrupt that landed inside compiled code (interruption_in)
+        if (stop := interruption_in(err)) is None:
+            raise
+        return interrupted("zfloc-replay", stop)
     except BrokenPipeError:  # output piped into e.g. head: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0

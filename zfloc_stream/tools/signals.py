@@ -40,6 +40,20 @@ def terminate_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
+def interruption_in(err: BaseException | None) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C, or Terminated) that err is or was raised from, else
+    None. A signal that lands while compiled code calls back into Python comes out as a
+    SystemError chained to the interrupt: Ctrl-C while numba loaded a kernel from its cache
+    (a fresh install's first run) ended `zfloc-stream demo` with a traceback and exit 1."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 def interrupted(prog: str, err: BaseException) -> int:
     """One line on stderr saying how the command ended; the exit code for it."""
     if isinstance(err, Terminated):
