@@ -387,9 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     except ZflocError as err:
         print(f"zfloc-stream: error: {one_line(err)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as err:
-        return interrupted("zfloc-stream", err)
-    except SystemError as err:  # an interrupt that landed inside compiled code (interruption_in)
+    except (KeyboardInterrupt, SystemError) as err:  # SystemError: an interrupt inside compiled code (interruption_in)
         if (stop := interruption_in(err)) is None:
             raise
         return interrupted("zfloc-stream", stop)

@@ -194,9 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     except ZflocError as err:
         print(f"zfloc-replay: error: {str(err).splitlines()[0] if str(err) else type(err).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as err:
-        return interrupted("zfloc-replay", err)
-    except SystemError as err:  # an interrupt that landed inside compiled code (interruption_in)
+    except (KeyboardInterrupt, SystemError) as err:  # SystemError: an interrupt inside compiled code (interruption_in)
         if (stop := interruption_in(err)) is None:
             raise
         return interrupted("zfloc-replay", stop)
