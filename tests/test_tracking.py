@@ -499,3 +499,22 @@ def test_confidence_above_dominance_weight_only_on_tracking_frames():
     tracker._round = replace(tracker._round, confirmation=policy.PolicyRule.AMBIGUITY)  # the same mode, not vouched for by the status
     cap = math.nextafter(tracker.settings.dominance_weight, 0.0)  # strictly below: ">= dominance_weight" is tracking only
     assert tracker.assess_frame(tracker.best.alignment, sensor_at(0), True) == ("ambiguous", cap)
+
+
+def test_hits_credited_from_another_bank_decide_the_status_at_once():
+    """HypothesisTracker.credit_hits: a bank after a loss whose lone mode has one hit is
+    `lost` (waiting for rounds_to_track hits); hits another bank earned at that place count
+    now, not at the next round: one short of rounds_to_track it stays `lost`, with them it
+    is `tracking` before any further round."""
+    from zfloc_stream.estimate import Status
+
+    settings = TrackingSettings()
+    rng = make_rng(7, "test", "credit")
+    for credited, status in [(settings.confirm_rounds_after_loss - 1, Status.LOST),
+                             (settings.confirm_rounds_after_loss, Status.TRACKING)]:
+        tracker = HypothesisTracker(settings)
+        tracker.declare_lost()
+        tracker.update([seen(TRUE, rng, 0, 0.8)], sensor_at(0), frame=0)
+        assert tracker.status is Status.LOST and tracker.best.hits == 1
+        tracker.credit_hits(tracker.best, credited)
+        assert tracker.status is status, credited
