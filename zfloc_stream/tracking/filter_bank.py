@@ -244,12 +244,15 @@ class HypothesisTracker:
         self.modes = sorted(keep, key=lambda m: m.id)
 
     def _reweight_and_prune(self) -> None:
-        """Modes under prune_weight leave, and those neither tracked nor confirmed that fell
-        behind (policy.fell_behind); of the rest the heaviest max_modes stay, the tracked mode
-        always among them: a round's newborns crowding the bank is no evidence against it
-        (its own rules, collapse or a confirmed rival, decide when it goes). Measured: on a
-        plan lacking the rooms the robot walked into (aces 0 #50), nine one-hit rivals
-        pushed out the mode tracked 0.2 m off the truth."""
+        """The heaviest max_modes modes are kept, the tracked mode always among them: a
+        round's newborns crowding the bank is no evidence against it (its own rules, collapse
+        or a confirmed rival, decide when it goes). Measured: on a plan lacking the rooms the
+        robot walked into (aces 0 #50), nine one-hit rivals pushed out the mode tracked 0.2 m
+        off the truth. Of those, the modes under prune_weight leave, and those neither tracked
+        nor confirmed that fell behind (policy.fell_behind): a mode that leaves frees no slot
+        this round. Dropping them before the cap instead (more modes kept in a crowded round)
+        changed one shared laser window of 200, aces 97 #100, from success to failure;
+        offices kidnaps and camera windows were the same."""
         s = self.settings
         self._normalise()
         by_weight = sorted(self.modes, key=lambda m: (m.id != self._tracked_id, -tie_key(m.weight), m.id))
