@@ -51,7 +51,9 @@ class LocalizerSettings(Section):
     # those frames (no `tracking` while it runs), adopted when its bank tracks a place its
     # round still finds so (recovery.Places.outscored). A score gap alone is no evidence: on the
     # held-out laser windows a 10-frame round prefers another place by >= 0.1 in 4.6% of
-    # the audits of a correct track
+    # the audits of a correct track. To start a test (not to adopt), no violation is asked
+    # when the round also scores the tracked place below audit_doubt_share of its usual
+    # audit score (a camera sees little open space through walls; Audit._seen_through)
     audit_frames: int = Field(10, ge=0, le=10_000)
     audit_margin: float = Field(0.05, ge=0, le=10)
     audit_min_violation: float = Field(0.05, ge=0, le=1)

@@ -116,15 +116,18 @@ class Places:
                             [local.frame_hits(h, c, old) for h, c in zip(recent.hits, recent.cameras)]
                             if local.metric_odometry else None)
 
-    def outscored(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2 | None = None) -> bool:
+    def outscored(self, outcome: RoundOutcome, old: Mode, sensor_xy, found: Sim2 | None = None,
+                  min_violation: float | None = None) -> bool:
         """outscored: the round (on recent frames alone) scores another place (found, default
-        its best) audit_margin above the tracked one as reported, and that place explains
-        the recent frames' hits as the monitor wants."""
+        its best) audit_margin above the tracked one as reported, the frames having seen open
+        space through min_violation of its walls (default audit_min_violation), and that
+        place explains the recent frames' hits as the monitor wants."""
         if outcome.result is None or not outcome.result.hypotheses:
             return False
         found = outcome.result.hypotheses[0].alignment if found is None else found
         if not outscored(outcome.result.hypotheses, self.local.alignment_of_mode(old), old, self.tracker, sensor_xy,
-                         self.settings.audit_margin, self.settings.audit_min_violation, found):
+                         self.settings.audit_margin,
+                         self.settings.audit_min_violation if min_violation is None else min_violation, found):
             return False
         hits = self.recent.all_hits()
         share = None if hits is None else self.monitor.share(found, hits)
