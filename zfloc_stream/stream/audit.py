@@ -9,8 +9,8 @@ last audit_frames frames saw alone, warm-started from the tracked place (so that
 competes on the same evidence). When it scores another place audit_margin above the
 tracked one, on frames that saw open space through the tracked place's walls
 (recovery.outscored; none asked when the round also scores the tracked place below
-audit_doubt_share of its usual audit score, _seen_through), a kidnap test starts on the audited frames (recovery.py), this round
-its first; it adopts a place only while its rounds still find the old place outscored, by
+audit_doubt_share of its usual audit score, _seen_through), a kidnap test starts on the
+audited frames (recovery.py), this round its first; it adopts a place only while its rounds still find the old place outscored, by
 a place scoring at least monitor_relative_share of the old mode's usual audit score
 (explains).
 
