@@ -10,9 +10,9 @@ competes on the same evidence). When it scores another place audit_margin above 
 tracked one, on frames that saw open space through the tracked place's walls
 (recovery.outscored; none asked when the round also scores the tracked place below
 audit_doubt_share of its usual audit score, _seen_through), a kidnap test starts on the
-audited frames (recovery.py), this round its first; it adopts a place only while its rounds still find the old place outscored, by
-a place scoring at least monitor_relative_share of the old mode's usual audit score
-(explains).
+audited frames (recovery.py), this round its first; it adopts a place only while its
+rounds still find the old place outscored (its walls seen through, always), by a place
+scoring at least monitor_relative_share of the old mode's usual audit score (explains).
 
 The audit's doubt (localizer.audit_doubt_share): an audit that scores the tracked place
 below audit_doubt_share of its usual audit score (or keeps nothing there) while it scores
