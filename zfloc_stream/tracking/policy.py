@@ -130,7 +130,13 @@ def fell_behind(mode: ModeNumbers, tracked: bool, s: TrackingSettings) -> bool:
     dominance_weight and the test ended without adopting it. A confirmed mode keeps its
     place: on the shared laser window aces 97 #100 the true place, lost in rooms the map
     lacks and beaten there for three rounds, was dropped and a place 47 m off reported."""
-    return not tracked and not is_confirmed(mode, s) and mode.collapses >= s.lost_rounds
+    return not tracked and not is_confirmed(mode, s) and collapsed(mode, s)
+
+
+def collapsed(mode: ModeNumbers, s: TrackingSettings) -> bool:
+    """The mode collapsed lost_rounds rounds in a row (COLLAPSED for the tracked mode,
+    FELL_BEHIND for another)."""
+    return mode.collapses >= s.lost_rounds
 
 
 # --- confirmation and status -------------------------------------------------------------
@@ -177,7 +183,7 @@ def loss_rule(tracked: ModeNumbers | None, leader: ModeNumbers | None, s: Tracki
     instead (OVERTAKEN)."""
     if tracked is None:
         return PolicyRule.PRUNED
-    if tracked.collapses >= s.lost_rounds:
+    if collapsed(tracked, s):
         return PolicyRule.COLLAPSED
     return PolicyRule.OVERTAKEN if leader is not tracked else None
 
