@@ -20,11 +20,20 @@ from zfloc_stream.io.session import read_session
 DEMO = [sys.executable, "-m", "zfloc_stream.tools.cli", "demo", "--scene", "rooms", "--frames", "3000", "--no-progress"]  # never done before the signal
 
 
+def _ctrl_c_as_in_a_terminal() -> None:
+    """In the child before exec: SIGINT at its default, so that Python turns it into
+    KeyboardInterrupt. A child inherits an ignored SIGINT, and a shell ignores it in its
+    background jobs: the suite run as one (`... &` or under nohup) saw Ctrl-C have no effect
+    on the demo, which ran to its end and exited 0."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _stopped_demo(out: Path, sig: int, after_rows: int) -> tuple[int, str, int, int]:
     """`zfloc-stream demo` stopped by `sig` once trajectory.csv has after_rows rows:
     (exit code, stderr, rows finished, frames in session.mcap). A SIGKILLed file is read
     with salvage, the others strictly (their footer must be there)."""
-    child = subprocess.Popen(DEMO + ["--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen(DEMO + ["--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=_ctrl_c_as_in_a_terminal)
     csv = out / "trajectory.csv"
     try:
         for _ in range(6000):
