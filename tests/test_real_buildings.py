@@ -123,6 +123,19 @@ def test_real_building_benchmark_ci_subset(monkeypatch):
     assert "### laser" in eval_real.table([row], [20], True)
 
 
+@pytest.mark.skipif(not INTEL_LOG.is_file(), reason="shared real logs not available")
+def test_drift_free_search_runs_on_the_map_or_on_its_plan(monkeypatch):
+    """eval_real.py --drift-free [--plan-style]: the exact search on hits placed by their true
+    poses, against the held-out map or that map drawn as a plan (what each allows)."""
+    eval_real = _eval_real()
+    monkeypatch.setattr(eval_real, "DATA", INTEL_LOG.parent)
+    on_map, on_plan = (eval_real.drift_free_row("intel", 445, 20, style) for style in (None, "one-face"))
+    assert on_map["success"] and on_plan["success"], (on_map, on_plan)
+    assert on_plan["plan_style"] == "one-face" and on_map["plan_style"] is None
+    # the plan has walls only: fewer of the hits lie near it than near the map
+    assert 0.5 < on_plan["coverage"] < on_map["coverage"]
+
+
 def _eval_real():
     from benchmarks.evaluation import eval_real
 

@@ -30,6 +30,7 @@ spread evenly along the log (they may overlap on short logs). Each window:
     python -m benchmarks.evaluation.eval_real --no-reference --set tracking.weight_gain=10
     python -m benchmarks.evaluation.eval_real --camera --windows 3           # camera rows too
     python -m benchmarks.evaluation.eval_real --drift-free --logs belgioioso,orebro   # what the maps allow
+    python -m benchmarks.evaluation.eval_real --drift-free --plan-style --windows 2     # what the plans allow
     python -m benchmarks.evaluation.eval_real --plan-style --camera --windows 2   # against the maps drawn as plans
     python -m benchmarks.evaluation.eval_real --plan-style two-face                # plans with both faces of each wall
     python -m benchmarks.evaluation.eval_real --plan-style two-face-centred       # both faces 0.1 m about each seen wall
@@ -305,19 +306,21 @@ def laser_window(log: str, start: int, length: int, overrides=(), seed: int = 0)
     return settings, seq.floorplan_for(start, start + length), list(seq.frames(start, start + length))
 
 
-def drift_free_row(log: str, start: int, length: int) -> dict:
+def drift_free_row(log: str, start: int, length: int, plan_style: str | None = None) -> dict:
     """The exact search with perfect relative motion: every hit of the window placed by its
     TRUE pose, then moved by a fixed rigid offset (so the grid is not aligned with the
     truth) and searched like the reference. What no odometry drift, i.e. the held-out
-    map alone, allows."""
-    _, floorplan, frames = laser_window(log, start, length)
+    map alone (plan_style: that map drawn as a plan, plan_of), allows."""
+    settings, floorplan, frames = laser_window(log, start, length)
+    if plan_style is not None:
+        floorplan = plan_of(floorplan, settings, plan_style, log, start, start + length)
     placed = true_hits(frames)
     offset = Sim2(1.0, 1.234, np.array([13.0, -7.0]))
     found = correlative_search(floorplan, offset.apply(placed))[0].alignment @ offset  # the identity when right
     truth = np.array([f.ground_truth[:2] for f in frames])
     errors = np.linalg.norm(found.apply(truth) - truth, axis=1)
     return {"log": log, "start": start, "length": length, "success": is_success(errors, 1.0),
-            "coverage": map_coverage(floorplan, placed)}
+            "coverage": map_coverage(floorplan, placed), "plan_style": plan_style}
 
 
 def _plane_T(pose) -> np.ndarray:
@@ -664,7 +667,8 @@ def main(argv=None) -> int:
                         help="laser reference rows read from / added to this JSON file (the reference does not depend on the localizer)")
     parser.add_argument("--reference-only", action="store_true", help="only fill --reference-cache, then stop")
     parser.add_argument("--drift-free", action="store_true",
-                        help="only the exact search on the laser windows placed by their true poses (what the held-out maps allow), then stop")
+                        help="only the exact search on the laser windows placed by their true poses (what the held-out maps, "
+                             "or with --plan-style their plans, allow), then stop")
     parser.add_argument("--plan-style", nargs="?", const="one-face", choices=PLAN_STYLES,
                         help="localize against each held-out map redrawn as an architect's DXF plan (one line per wall, "
                              "two-face: both faces of each wall, the wall behind the face the sensor saw; two-face-centred: "
@@ -677,8 +681,10 @@ def main(argv=None) -> int:
     args.set = list(args.set) + drift_overrides(conditions.drift)
     if args.reference_only and args.reference_cache is None:
         parser.error("--reference-only needs --reference-cache")
-    if args.plan_style and (args.reference_cache or args.drift_free or args.no_laser and not args.camera):
-        parser.error("--plan-style runs its own references (no --reference-cache, --drift-free) on laser and/or --camera windows")
+    if args.plan_style and (args.reference_cache or args.no_laser and not args.camera):
+        parser.error("--plan-style runs its own references (no --reference-cache) on laser and/or --camera windows")
+    if args.drift_free and args.camera:
+        parser.error("--drift-free searches the laser windows' hits: drop --camera")
     logs = [s for s in args.logs.split(",") if s]
     missing_logs = [log for log in logs if not (DATA / f"{log}-corrected.log.gz").exists()]
     if missing_logs:
@@ -707,7 +713,7 @@ def main(argv=None) -> int:
         if args.json:
             args.json.write_text(json.dumps(rows, indent=1))
         return 0
-    if args.plan_style:
+    if args.plan_style and not args.drift_free:
         status = plan_style_main(args, jobs, lengths)
         print(f"\n{len(jobs)} windows in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
         return status
@@ -721,8 +727,8 @@ def main(argv=None) -> int:
             args.json.write_text(json.dumps(rows, indent=1))
         return 0
     if args.drift_free:
-        rows = _map(drift_free_row, list(dict.fromkeys(j[:3] for j in jobs)), args.workers)
-        print("| drift-free exact search | " + " | ".join(f"#{L}" for L in lengths) + " | all |\n" + "|---" * (len(lengths) + 2) + "|")
+        rows = _map(drift_free_row, [(*w, args.plan_style) for w in dict.fromkeys(j[:3] for j in jobs)], args.workers)
+        print(f"| drift-free exact search{' on the ' + args.plan_style + ' plans' if args.plan_style else ''} | " + " | ".join(f"#{L}" for L in lengths) + " | all |\n" + "|---" * (len(lengths) + 2) + "|")
         for log in logs:
             mine = [r for r in rows if r["log"] == log]
             cells = [_pct([r["success"] for r in mine if r["length"] == L]) for L in lengths]
